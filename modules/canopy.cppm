@@ -2,3 +2,7 @@
 export module canopy;
 export import canopy.simd;
 export import canopy.math;
+export import canopy.geometry;
+export import canopy.intersector;
+export import canopy.bvh;
+export import canopy.query;

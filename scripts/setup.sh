@@ -13,7 +13,7 @@ apt_packages=(
   clang-19 clang-tools-19 libclang-rt-19-dev lld-19
   ninja-build pkg-config
   catch2
-  libtbb-dev
+  libtbb-dev libfmt-dev
 )
 # The machine image ships Node.js with its own npm; Debian's npm would conflict with it.
 command -v npm >/dev/null 2>&1 || apt_packages+=(npm)

@@ -1,0 +1,11 @@
+// canopy.bvh — bounding volume hierarchies over any primitive with get_bounds/intersect, built
+// by a parallel binned SAH builder, traversed with a custom intersector; instance<BVH> places a
+// shared BVH with an affine transform, and BVHs of instances nest to any depth
+// (bvh<instance<bvh<instance<bvh<triangle>>>>>).
+export module canopy.bvh;
+export import canopy.intersector;
+export import :storage;
+export import :parallel;
+export import :build;
+export import :traverse;
+export import :instance;

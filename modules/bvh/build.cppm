@@ -1,0 +1,211 @@
+// canopy.bvh:build — binned SAH builder (Wald 2007, "On fast Construction of SAH-based Bounding
+// Volume Hierarchies"), binning primitive centroids on all three axes, subtrees built in parallel
+// (oneTBB task groups).
+//
+// Contract: every input primitive appears exactly once in the result; a primitive type with a
+// `prim_id` member gets prim_id = its index in the input sequence. Leaves hold at most
+// max_leaf_size primitives, except where max_depth stops the recursion or all centroids coincide
+// (then leaves split by index). NaN bounds never crash the builder (they sort into bin 0).
+module;
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <span>
+#include <vector>
+export module canopy.bvh:build;
+import canopy.geometry;
+import :storage;
+import :parallel;
+
+export namespace canopy {
+
+struct bvh_build_options {
+    int max_leaf_size = 4;                    // primitives per leaf (≥ 1)
+    int bins = 16;                            // SAH bins per axis (2 … 256)
+    int max_depth = bvh_max_depth;            // clamped to [1, bvh_max_depth]
+    sah_costs costs = {};
+    std::size_t parallel_threshold = 4096;    // subtrees with more primitives become parallel tasks
+};
+
+namespace detail {
+
+inline constexpr int max_bins = 256;
+
+template <typename S>
+struct build_context {
+    std::vector<basic_aabb<S>> boxes;
+    std::vector<vec3<S>> centers;
+    std::vector<std::uint32_t> order;
+    std::vector<bvh_node<S>>* nodes = nullptr;
+    std::atomic<std::uint32_t> node_count{1};
+    std::atomic<int> depth{0};
+    bvh_build_options options;
+};
+
+template <typename S>
+struct bin {
+    basic_aabb<S> bounds;
+    std::size_t count = 0;
+};
+
+// Bin of a centroid coordinate; NaN and out-of-range values clamp into [0, bins).
+template <typename S>
+int bin_index(S x, S lo, S scale, int bins) {
+    S const f = (x - lo) * scale;
+    if (!(f >= S(0))) return 0;
+    if (!(f < S(bins))) return bins - 1;
+    return int(f);
+}
+
+template <typename S>
+void build_node(build_context<S>& ctx, std::uint32_t node_index, std::size_t begin, std::size_t end, int depth) {
+    auto& nodes = *ctx.nodes;
+    auto const& opt = ctx.options;
+    std::size_t const count = end - begin;
+
+    // Bounds of the primitives and of their centroids.
+    basic_aabb<S> bounds, centroid_bounds;
+    for (std::size_t i = begin; i < end; ++i) {
+        bounds = extend(bounds, ctx.boxes[ctx.order[i]]);
+        centroid_bounds = extend(centroid_bounds, ctx.centers[ctx.order[i]]);
+    }
+    nodes[node_index].bounds = bounds;
+
+    int prev = ctx.depth.load(std::memory_order_relaxed);
+    while (prev < depth + 1 && !ctx.depth.compare_exchange_weak(prev, depth + 1)) {}
+
+    auto make_leaf = [&] {
+        nodes[node_index].index = std::uint32_t(begin);
+        nodes[node_index].count = std::uint32_t(count);
+    };
+    if (count == 1 || depth + 1 >= opt.max_depth) return make_leaf();
+
+    // Best binned SAH split over all three axes.
+    int const bins = opt.bins;
+    double best_cost = std::numeric_limits<double>::infinity();
+    int best_axis = -1, best_split = 0;
+    double const parent_area = surface_area(bounds);
+    for (int axis = 0; axis < 3; ++axis) {
+        S const lo = centroid_bounds.min[axis];
+        S const extent = centroid_bounds.max[axis] - lo;
+        if (!(extent > S(0))) continue;
+        S const scale = S(bins) / extent;
+        std::array<bin<S>, max_bins> b{};
+        for (std::size_t i = begin; i < end; ++i) {
+            std::uint32_t const p = ctx.order[i];
+            auto& bb = b[std::size_t(bin_index(ctx.centers[p][axis], lo, scale, bins))];
+            bb.bounds = extend(bb.bounds, ctx.boxes[p]);
+            ++bb.count;
+        }
+        // Sweep from the right, then from the left; split k puts bins [0, k) left.
+        std::array<double, max_bins> right_cost{};
+        basic_aabb<S> acc;
+        std::size_t n = 0;
+        for (int k = bins - 1; k > 0; --k) {
+            acc = extend(acc, b[std::size_t(k)].bounds);
+            n += b[std::size_t(k)].count;
+            right_cost[std::size_t(k)] = n ? double(surface_area(acc)) * double(n) : 0.0;
+        }
+        acc = basic_aabb<S>{};
+        n = 0;
+        for (int k = 1; k < bins; ++k) {
+            acc = extend(acc, b[std::size_t(k - 1)].bounds);
+            n += b[std::size_t(k - 1)].count;
+            if (n == 0 || n == count) continue;
+            double const cost = double(surface_area(acc)) * double(n) + right_cost[std::size_t(k)];
+            if (cost < best_cost) {
+                best_cost = cost;
+                best_axis = axis;
+                best_split = k;
+            }
+        }
+    }
+
+    double const leaf_cost = double(opt.costs.intersection) * double(count);
+    double const split_cost = parent_area > 0.0
+                                  ? opt.costs.traversal + opt.costs.intersection * best_cost / parent_area
+                                  : opt.costs.traversal + leaf_cost;
+    bool const fits_leaf = count <= std::size_t(opt.max_leaf_size);
+    if (fits_leaf && (best_axis < 0 || split_cost >= leaf_cost)) return make_leaf();
+
+    // Partition by the chosen bin boundary, or by index when centroids coincide.
+    std::size_t mid;
+    if (best_axis >= 0) {
+        S const lo = centroid_bounds.min[best_axis];
+        S const scale = S(bins) / (centroid_bounds.max[best_axis] - lo);
+        auto const first = ctx.order.begin() + std::ptrdiff_t(begin);
+        auto const last = ctx.order.begin() + std::ptrdiff_t(end);
+        auto const split = std::partition(first, last, [&](std::uint32_t p) {
+            return bin_index(ctx.centers[p][best_axis], lo, scale, bins) < best_split;
+        });
+        mid = std::size_t(split - ctx.order.begin());
+    } else {
+        mid = begin + count / 2;
+    }
+
+    std::uint32_t const children = ctx.node_count.fetch_add(2, std::memory_order_relaxed);
+    nodes[node_index].index = children;
+    nodes[node_index].count = 0;
+    if (count >= opt.parallel_threshold) {
+        parallel_invoke([&] { build_node(ctx, children, begin, mid, depth + 1); },
+                        [&] { build_node(ctx, children + 1, mid, end, depth + 1); });
+    } else {
+        build_node(ctx, children, begin, mid, depth + 1);
+        build_node(ctx, children + 1, mid, end, depth + 1);
+    }
+}
+
+} // namespace detail
+
+template <typename Prim>
+bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options options = {}) {
+    using S = bounds_value_t<Prim>;
+    bvh<Prim> result;
+    std::size_t const n = prims.size();
+    if (n == 0) return result;
+
+    options.max_leaf_size = std::max(options.max_leaf_size, 1);
+    options.bins = std::clamp(options.bins, 2, detail::max_bins);
+    options.max_depth = std::clamp(options.max_depth, 1, bvh_max_depth);
+
+    detail::build_context<S> ctx;
+    ctx.options = options;
+    ctx.boxes.resize(n);
+    ctx.centers.resize(n);
+    ctx.order.resize(n);
+    std::iota(ctx.order.begin(), ctx.order.end(), std::uint32_t(0));
+    parallel_for_chunks(n, 1024, [&](std::size_t first, std::size_t last) {
+        for (std::size_t i = first; i < last; ++i) {
+            ctx.boxes[i] = get_bounds(prims[i]);
+            ctx.centers[i] = center(ctx.boxes[i]);
+        }
+    });
+
+    result.nodes.resize(2 * n - 1);
+    ctx.nodes = &result.nodes;
+    detail::build_node(ctx, 0, 0, n, 0);
+    result.nodes.resize(ctx.node_count.load());
+    result.depth = ctx.depth.load();
+
+    result.primitives.resize(n);
+    parallel_for_chunks(n, 1024, [&](std::size_t first, std::size_t last) {
+        for (std::size_t i = first; i < last; ++i) {
+            result.primitives[i] = prims[ctx.order[i]];
+            if constexpr (requires(Prim& p) { p.prim_id = std::uint32_t(0); })
+                result.primitives[i].prim_id = ctx.order[i];
+        }
+    });
+    return result;
+}
+
+template <typename Prim>
+bvh<Prim> build_binned_sah(std::vector<Prim> const& prims, bvh_build_options options = {}) {
+    return build_binned_sah(std::span<Prim const>(prims), options);
+}
+
+} // namespace canopy

@@ -1,0 +1,98 @@
+// canopy.bvh:storage — the BVH layout and its statistics.
+//
+// Binary BVH, nodes in one array, the two children of an inner node side by side. Primitives are
+// stored once, reordered so that each leaf owns a contiguous range. Depth never exceeds
+// bvh_max_depth (the builder enforces it), which bounds every traversal stack.
+module;
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <type_traits>
+#include <utility>
+#include <vector>
+export module canopy.bvh:storage;
+import canopy.geometry;
+
+export namespace canopy {
+
+// Deepest BVH the builder produces; traversal stacks are sized from it.
+inline constexpr int bvh_max_depth = 64;
+
+// Scalar type of a primitive's bounds (float for triangle and for instance<bvh<triangle>>).
+template <typename Prim>
+using bounds_value_t = typename decltype(get_bounds(std::declval<Prim const&>()))::value_type;
+
+template <typename S>
+struct bvh_node {
+    basic_aabb<S> bounds;
+    // Inner node: index of the first child (the second is index + 1), count == 0.
+    // Leaf: index of the first primitive, count ≥ 1 primitives.
+    std::uint32_t index = 0;
+    std::uint32_t count = 0;
+
+    bool is_leaf() const { return count != 0; }
+};
+
+template <typename Prim>
+struct bvh {
+    using primitive_type = Prim;
+    using value_type = bounds_value_t<Prim>;
+    using node_type = bvh_node<value_type>;
+    using acceleration_structure_tag = void;
+
+    std::vector<node_type> nodes;   // nodes[0] is the root; empty for an empty BVH
+    std::vector<Prim> primitives;   // in leaf order
+    int depth = 0;                  // number of node levels (a single leaf: 1)
+
+    bool empty() const { return nodes.empty(); }
+    basic_aabb<value_type> bounds() const { return nodes.empty() ? basic_aabb<value_type>{} : nodes[0].bounds; }
+};
+
+// A BVH's bounds as a primitive of an enclosing structure (a list of BVHs, multiple roots).
+template <typename Prim>
+basic_aabb<bounds_value_t<Prim>> get_bounds(bvh<Prim> const& b) {
+    return b.bounds();
+}
+
+// Surface area heuristic costs (MacDonald & Booth 1990): per node visited and per primitive tested.
+struct sah_costs {
+    float traversal = 1.0f;
+    float intersection = 1.0f;
+};
+
+struct bvh_stats {
+    std::size_t node_count = 0;
+    std::size_t leaf_count = 0;
+    std::size_t primitive_count = 0;
+    int depth = 0;
+    std::size_t max_leaf_size = 0;
+    double sah_cost = 0.0;           // expected cost of a random ray hitting the root box
+    std::size_t bytes = 0;           // nodes + primitives
+    double bytes_per_primitive = 0.0;
+};
+
+template <typename Prim>
+bvh_stats compute_stats(bvh<Prim> const& b, sah_costs costs = {}) {
+    bvh_stats s;
+    s.node_count = b.nodes.size();
+    s.primitive_count = b.primitives.size();
+    s.depth = b.depth;
+    s.bytes = b.nodes.size() * sizeof(typename bvh<Prim>::node_type) + b.primitives.size() * sizeof(Prim);
+    if (b.nodes.empty()) return s;
+    double const root_area = surface_area(b.nodes[0].bounds);
+    for (auto const& n : b.nodes) {
+        double const rel = root_area > 0.0 ? double(surface_area(n.bounds)) / root_area : 1.0;
+        if (n.is_leaf()) {
+            ++s.leaf_count;
+            s.max_leaf_size = std::max<std::size_t>(s.max_leaf_size, n.count);
+            s.sah_cost += rel * costs.intersection * n.count;
+        } else {
+            s.sah_cost += rel * costs.traversal;
+        }
+    }
+    s.bytes_per_primitive = s.primitive_count ? double(s.bytes) / double(s.primitive_count) : 0.0;
+    return s;
+}
+
+} // namespace canopy

@@ -1,0 +1,96 @@
+// canopy.geometry:hit_record — what every ray/primitive test returns.
+//
+// For scalar rays `hit` is a bool and the ids are std::uint32_t; for SIMD rays (T = float8, ...)
+// `hit` is a mask and every field is a SIMD type with one lane per ray.
+module;
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <type_traits>
+export module canopy.geometry:hit_record;
+import canopy.math;
+
+export namespace canopy {
+
+// Id of "no primitive / no instance": 0xffffffff (all bits set, -1 in SIMD int lanes).
+inline constexpr std::uint32_t invalid_id = ~0u;
+
+// Deepest instance nesting a hit record reports (outermost plus inner levels).
+inline constexpr int max_instance_depth = 4;
+
+// Integer type of ids for scalar type T: std::uint32_t for scalars, int8 for float8, ...
+template <typename T>
+using index_type_t = std::conditional_t<simd::simd_width_v<T> == 1, std::uint32_t, simd::int_type_t<T>>;
+
+template <typename T>
+struct basic_hit_record {
+    using value_type = T;
+    using index_type = index_type_t<T>;
+
+    simd::mask_type_t<T> hit{};
+    T t{std::numeric_limits<simd::scalar_type_t<T>>::infinity()};
+    index_type prim_id{index_type(invalid_id)};
+    index_type geom_id{index_type(invalid_id)};
+    // Outermost instance on the path to the hit (invalid_id when not instanced).
+    index_type inst_id{index_type(invalid_id)};
+    // Instances below the outermost: inner_inst_id[0] is one level down, and so on; invalid_id
+    // past the innermost. Filled when a query accepts the hit (hooks see them unset).
+    std::array<index_type, max_instance_depth - 1> inner_inst_id{
+        index_type(invalid_id), index_type(invalid_id), index_type(invalid_id)};
+    // Barycentric weights of the primitive's 2nd and 3rd vertex (triangles).
+    T u{};
+    T v{};
+};
+
+// Scalar type of a ray: float, double, float8, ...
+template <typename Ray>
+using ray_value_t = std::remove_cvref_t<decltype(std::declval<Ray const&>().tmin)>;
+
+// The paper's spelling: the record a test of Ray against Prim returns.
+template <typename Ray, typename Prim>
+using hit_record = basic_hit_record<ray_value_t<Ray>>;
+
+// Writes a hit into the lanes of hr where `hit` is set (for scalar rays: hit is true).
+template <typename T>
+[[gnu::always_inline]] inline void record_hit(basic_hit_record<T>& hr, simd::mask_type_t<T> const& hit, T t,
+                                              T u, T v, std::uint32_t prim_id, std::uint32_t geom_id) {
+    if constexpr (simd::simd_width_v<T> == 1) {
+        hr.hit = hit;
+        hr.t = t;
+        hr.u = u;
+        hr.v = v;
+        hr.prim_id = prim_id;
+        hr.geom_id = geom_id;
+    } else {
+        using index_t = index_type_t<T>;
+        hr.hit = hit;
+        hr.t = simd::select(hit, t, hr.t);
+        hr.u = simd::select(hit, u, T(0));
+        hr.v = simd::select(hit, v, T(0));
+        hr.prim_id = simd::select(hit, index_t(std::int32_t(prim_id)), hr.prim_id);
+        hr.geom_id = simd::select(hit, index_t(std::int32_t(geom_id)), hr.geom_id);
+    }
+}
+
+// Lane-wise choice between two records: m ? a : b.
+template <typename T>
+basic_hit_record<T> select(simd::mask_type_t<T> const& m, basic_hit_record<T> const& a,
+                           basic_hit_record<T> const& b) {
+    if constexpr (simd::simd_width_v<T> == 1) {
+        return m ? a : b;
+    } else {
+        basic_hit_record<T> r;
+        r.hit = (m & a.hit) | (!m & b.hit);
+        r.t = simd::select(m, a.t, b.t);
+        r.prim_id = simd::select(m, a.prim_id, b.prim_id);
+        r.geom_id = simd::select(m, a.geom_id, b.geom_id);
+        r.inst_id = simd::select(m, a.inst_id, b.inst_id);
+        for (int i = 0; i < max_instance_depth - 1; ++i)
+            r.inner_inst_id[i] = simd::select(m, a.inner_inst_id[i], b.inner_inst_id[i]);
+        r.u = simd::select(m, a.u, b.u);
+        r.v = simd::select(m, a.v, b.v);
+        return r;
+    }
+}
+
+} // namespace canopy

@@ -1,0 +1,162 @@
+// canopy.geometry:triangle — triangles and their ray tests.
+//
+// Default test: watertight, Woop, Benthin, Wald 2013, "Watertight Ray/Triangle Intersection",
+// JCGT 2(1). The ray is sheared so it runs along +z through the origin; each vertex is
+// transformed on its own, so triangles sharing a vertex (bit-identical coordinates) see the same
+// transformed vertex and no ray slips between them. The three 2-D edge functions are evaluated
+// with Kahan's FMA difference of products (relative error ≤ 2u, Jeannerod, Louvet, Muller 2013),
+// so their signs are exact for the transformed vertices (barring under/overflow): a ray through a
+// shared edge or vertex gives exact zeros there and hits (edges and vertices are inside).
+//
+// Contracts of every test here: hit iff tmin ≤ t ≤ tmax for the returned t; degenerate
+// (zero-area) triangles never hit; NaN/Inf in the ray make it miss (all tests are accept-style
+// comparisons that NaN fails). u, v are the barycentric weights of v1 and v2.
+//
+// Möller & Trumbore 1997 is kept as an opt-in (intersect_moller_trumbore): faster to set up, not
+// watertight.
+module;
+#include <cstdint>
+#include <type_traits>
+#include <utility>
+export module canopy.geometry:triangle;
+import canopy.math;
+import :hit_record;
+
+export namespace canopy {
+
+template <typename T>
+struct basic_triangle {
+    using value_type = T;
+    vec3<T> v0, v1, v2;
+    // Index in the sequence a BVH was built from (the builder sets it), and a user-chosen
+    // geometry id (e.g. which mesh / texture).
+    std::uint32_t prim_id = 0;
+    std::uint32_t geom_id = 0;
+};
+using triangle = basic_triangle<float>;
+
+template <typename T>
+basic_aabb<T> get_bounds(basic_triangle<T> const& tri) {
+    return extend(extend(basic_aabb<T>{tri.v0, tri.v0}, tri.v1), tri.v2);
+}
+
+// True when the three vertices are collinear or repeated: the cross product of the edges,
+// evaluated in double (exact for float vertices of similar magnitude), is zero.
+template <typename T>
+bool is_degenerate(basic_triangle<T> const& tri) {
+    vec3<double> const a(tri.v0), b(tri.v1), c(tri.v2);
+    vec3<double> const n = cross(b - a, c - a);
+    return n.x == 0.0 && n.y == 0.0 && n.z == 0.0;
+}
+
+// a·b − c·d with one rounding error of at most 2u relative (Kahan's algorithm with FMA).
+template <typename T>
+[[gnu::always_inline]] inline T difference_of_products(T a, T b, T c, T d) {
+    T const cd = c * d;
+    T const error = simd::fma(-c, d, cd);
+    T const ab_minus_cd = simd::fma(a, b, -cd);
+    return ab_minus_cd + error;
+}
+
+// Woop et al.'s ray shear, computed once per ray: axis permutation (kx, ky, kz) with kz the
+// largest |direction| component, and the shear constants.
+template <typename T>
+struct watertight_shear {
+    // Component k of v in the permuted frame (x → kx, y → ky, z → kz).
+    vec3<T> permute(vec3<T> const& v) const {
+        if constexpr (simd::simd_width_v<T> == 1) {
+            return {v[kx], v[ky], v[kz]};
+        } else {
+            // Per lane: kz = x, y or z; (kx, ky) is the cyclic successor pair, swapped when
+            // the direction along kz is negative (keeps the winding).
+            T const px = simd::select(z_is_x, v.y, simd::select(z_is_y, v.z, v.x));
+            T const py = simd::select(z_is_x, v.z, simd::select(z_is_y, v.x, v.y));
+            T const pz = simd::select(z_is_x, v.x, simd::select(z_is_y, v.y, v.z));
+            return {simd::select(swap_xy, py, px), simd::select(swap_xy, px, py), pz};
+        }
+    }
+
+    int kx = 0, ky = 1, kz = 2;                       // scalar rays
+    simd::mask_type_t<T> z_is_x{}, z_is_y{}, swap_xy{}; // SIMD rays
+    T sx{}, sy{}, sz{};
+};
+
+template <typename T>
+watertight_shear<T> make_watertight_shear(vec3<T> const& dir) {
+    watertight_shear<T> s;
+    vec3<T> const a = abs(dir);
+    if constexpr (simd::simd_width_v<T> == 1) {
+        s.kz = (a.x >= a.y && a.x >= a.z) ? 0 : (a.y >= a.z ? 1 : 2);
+        s.kx = s.kz == 2 ? 0 : s.kz + 1;
+        s.ky = s.kx == 2 ? 0 : s.kx + 1;
+        if (dir[s.kz] < T(0)) std::swap(s.kx, s.ky);
+    } else {
+        s.z_is_x = (a.x >= a.y) & (a.x >= a.z);
+        s.z_is_y = !s.z_is_x & (a.y >= a.z);
+        T const dz = simd::select(s.z_is_x, dir.x, simd::select(s.z_is_y, dir.y, dir.z));
+        s.swap_xy = dz < T(0);
+    }
+    vec3<T> const d = s.permute(dir);
+    s.sx = d.x / d.z;
+    s.sy = d.y / d.z;
+    s.sz = T(1) / d.z;
+    return s;
+}
+
+// Watertight ray/triangle test (the default).
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+basic_hit_record<T> intersect(basic_ray<T> const& ray, basic_triangle<S> const& tri) {
+    basic_hit_record<T> hr;
+    watertight_shear<T> const shear = make_watertight_shear(ray.direction);
+
+    // Translate to the ray origin, permute, shear (each vertex on its own).
+    vec3<T> const a = shear.permute(vec3<T>(tri.v0) - ray.origin);
+    vec3<T> const b = shear.permute(vec3<T>(tri.v1) - ray.origin);
+    vec3<T> const c = shear.permute(vec3<T>(tri.v2) - ray.origin);
+    T const ax = a.x - shear.sx * a.z, ay = a.y - shear.sy * a.z;
+    T const bx = b.x - shear.sx * b.z, by = b.y - shear.sy * b.z;
+    T const cx = c.x - shear.sx * c.z, cy = c.y - shear.sy * c.z;
+
+    // Sign-exact edge functions; inside (edges included) when all share a sign.
+    T const eu = difference_of_products(cx, by, cy, bx);
+    T const ev = difference_of_products(ax, cy, ay, cx);
+    T const ew = difference_of_products(bx, ay, by, ax);
+    auto const inside = ((eu >= T(0)) & (ev >= T(0)) & (ew >= T(0))) |
+                        ((eu <= T(0)) & (ev <= T(0)) & (ew <= T(0)));
+    if (simd::none(inside)) return hr;
+
+    T const det = eu + ev + ew;
+    T const scaled_t = eu * (shear.sz * a.z) + ev * (shear.sz * b.z) + ew * (shear.sz * c.z);
+    T const t = scaled_t / det;
+    auto const hit = inside & (det != T(0)) & (t >= ray.tmin) & (t <= ray.tmax);
+    if (simd::none(hit) || is_degenerate(tri)) return hr;
+
+    record_hit(hr, hit, t, ev / det, ew / det, tri.prim_id, tri.geom_id);
+    return hr;
+}
+
+// Möller & Trumbore 1997, "Fast, Minimum Storage Ray/Triangle Intersection" (opt-in; not
+// watertight: rays through shared edges can miss both triangles).
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+basic_hit_record<T> intersect_moller_trumbore(basic_ray<T> const& ray, basic_triangle<S> const& tri) {
+    basic_hit_record<T> hr;
+    vec3<T> const e1(tri.v1 - tri.v0);
+    vec3<T> const e2(tri.v2 - tri.v0);
+    vec3<T> const p = cross(ray.direction, e2);
+    T const det = dot(e1, p);
+    T const inv_det = T(1) / det;
+    vec3<T> const s = ray.origin - vec3<T>(tri.v0);
+    T const u = dot(s, p) * inv_det;
+    vec3<T> const q = cross(s, e1);
+    T const v = dot(ray.direction, q) * inv_det;
+    T const t = dot(e2, q) * inv_det;
+    auto const hit = (det != T(0)) & (u >= T(0)) & (v >= T(0)) & (u + v <= T(1)) & (t >= ray.tmin) &
+                     (t <= ray.tmax);
+    if (simd::none(hit) || is_degenerate(tri)) return hr;
+    record_hit(hr, hit, t, u, v, tri.prim_id, tri.geom_id);
+    return hr;
+}
+
+} // namespace canopy

@@ -1,0 +1,103 @@
+// canopy.intersector — custom intersectors (Zellmann, "Adding Custom Intersectors to the C++ Ray
+// Tracing Template Library Visionaray").
+//
+// An intersector is user code handed to a query at compile time. Every ray/primitive and every
+// ray/box test of the traversal goes through it, at every level of nested BVHs:
+//
+//   struct my_isect : canopy::basic_intersector<my_isect> {
+//       using canopy::basic_intersector<my_isect>::operator();
+//       template <typename Ray> auto operator()(Ray const& ray, canopy::triangle const& tri);
+//       template <typename Ray, typename... Args>
+//       auto operator()(Ray const& ray, canopy::aabb const& box, Args&&... args);  // optional
+//   };
+//
+// Guarantees:
+// - Anything the intersector does not handle falls back to the library's own test, also when the
+//   `using` line is forgotten (the derived operator() then hides the base's) and for lambdas or
+//   overload sets, which are intersectors too.
+// - Nested structures (BVHs, instances) are never handed to hooks: the intersector is passed down
+//   into them (call_hooks_or_descend below is the one place that decides).
+// - With default_intersector, or with hooks that only forward, the calls inline to exactly the
+//   default tests: no cost.
+module;
+#include <concepts>
+#include <type_traits>
+#include <utility>
+export module canopy.intersector;
+export import canopy.geometry;
+
+export namespace canopy {
+
+// CRTP base: forwards every test to the library's intersect(), found by ADL.
+template <typename Derived>
+struct basic_intersector {
+    template <typename Ray, typename Prim, typename... Args>
+        requires requires(Ray const& ray, Prim const& prim, Args&&... args) {
+            intersect(ray, prim, std::forward<Args>(args)...);
+        }
+    auto operator()(Ray const& ray, Prim const& prim, Args&&... args) {
+        return intersect(ray, prim, std::forward<Args>(args)...);
+    }
+};
+
+struct default_intersector : basic_intersector<default_intersector> {};
+
+// Opt-in Möller–Trumbore for triangles (not watertight; see canopy.geometry:triangle).
+struct moller_trumbore_intersector : basic_intersector<moller_trumbore_intersector> {
+    using basic_intersector<moller_trumbore_intersector>::operator();
+    template <typename Ray, typename S>
+    auto operator()(Ray const& ray, basic_triangle<S> const& tri) {
+        return intersect_moller_trumbore(ray, tri);
+    }
+};
+
+// A structure that contains primitives and is traversed with the caller's intersector and query
+// (bvh<P>, instance<B>): it declares `using acceleration_structure_tag = void;`.
+template <typename P>
+concept acceleration_structure = requires { typename P::acceleration_structure_tag; };
+
+// I intercepts the ray/primitive test of Prim (its own overload, a base forwarding one, or a
+// lambda).
+template <typename I, typename Ray, typename Prim>
+concept primitive_hook_for = requires(I& isect, Ray const& ray, Prim const& prim) {
+    { isect(ray, prim) };
+};
+
+// I intercepts ray/box tests (called with the precomputed inverse direction).
+template <typename I, typename Ray, typename Box, typename InvDir>
+concept box_hook_for = requires(I& isect, Ray const& ray, Box const& box, InvDir const& inv_dir) {
+    { isect(ray, box, inv_dir) };
+};
+
+// The ray/box test of the traversal: the intersector's hook if it has one, else the default.
+template <typename I, typename Ray, typename Box, typename InvDir>
+[[gnu::always_inline]] inline auto test_box(I& isect, Ray const& ray, Box const& box, InvDir const& inv_dir) {
+    if constexpr (box_hook_for<I, Ray, Box, InvDir>)
+        return isect(ray, box, inv_dir);
+    else
+        return intersect(ray, box, inv_dir);
+}
+
+// The ray/primitive test of the traversal: the intersector's hook if it has one, else the default.
+template <typename I, typename Ray, typename Prim>
+[[gnu::always_inline]] inline auto test_primitive(I& isect, Ray const& ray, Prim const& prim) {
+    if constexpr (primitive_hook_for<I, Ray, Prim>)
+        return isect(ray, prim);
+    else
+        return intersect(ray, prim);
+}
+
+// The one place that tells leaf primitives from nested structures. Query is a hit accumulator
+// (canopy.query): report(hit_record, ray) accepts or rejects a candidate, tightens ray.tmax as
+// the query allows, and returns true when the whole traversal must stop. Nested structures are
+// traversed by their own `traverse(ray, structure, isect, query)` (found by ADL), which comes back
+// here for their primitives. Returns true when the query is finished.
+template <typename Ray, typename Prim, typename I, typename Query>
+[[gnu::always_inline]] inline bool call_hooks_or_descend(Ray& ray, Prim const& prim, I& isect, Query& query) {
+    if constexpr (acceleration_structure<Prim>)
+        return traverse(ray, prim, isect, query);
+    else
+        return query.report(test_primitive(isect, ray, prim), ray);
+}
+
+} // namespace canopy

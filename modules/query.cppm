@@ -1,0 +1,191 @@
+// canopy.query — the visibility queries of the paper: closest_hit, any_hit, multi_hit<N>, over
+// an iterator range of primitives, of BVHs (multiple roots) or of instances, with or without a
+// custom intersector (taken by reference: counters in it are visible to the caller).
+//
+// Guarantees, at every level of nesting:
+// - hooks receive a ray whose tmax is the closest accepted hit so far (closest_hit), or the N-th
+//   accepted hit once N are found (multi_hit): intersect() inside a hook already culls.
+// - any_hit stays any-hit in nested BVHs and stops the whole traversal at the first accepted hit.
+// - multi_hit<N> returns up to N accepted hits sorted by t, each (instance path, primitive) once.
+// - Equal t: the hit with the smaller (inst_id, inner_inst_id…, prim_id) wins, so results do not
+//   depend on traversal order (BVH, brute force, packets and threads agree).
+// Packet rays (basic_ray<float8>, …) are supported by closest_hit and any_hit; lanes whose
+// tmin ≤ tmax fails (including NaN) are inactive and report misses.
+module;
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <utility>
+export module canopy.query;
+export import canopy.bvh;
+
+export namespace canopy {
+
+namespace detail {
+
+// Ids of the instances entered on the way down; copied into accepted hit records.
+struct instance_path {
+    std::array<std::uint32_t, max_instance_depth> ids{};
+    int depth = 0;
+
+    void enter_instance(std::uint32_t id) { ids[std::size_t(depth++)] = id; }
+    void leave_instance() { --depth; }
+
+    template <typename T>
+    void stamp(basic_hit_record<T>& hr) const {
+        using index_t = index_type_t<T>;
+        hr.inst_id = depth > 0 ? index_t(ids[0]) : index_t(invalid_id);
+        for (int k = 1; k < max_instance_depth; ++k)
+            hr.inner_inst_id[std::size_t(k - 1)] = k < depth ? index_t(ids[std::size_t(k)]) : index_t(invalid_id);
+    }
+};
+
+// Unsigned a < b, lane-wise, for ids held in signed SIMD int lanes.
+template <typename I>
+auto id_less(I const& a, I const& b) {
+    I const bias(std::numeric_limits<std::int32_t>::min());
+    return (a ^ bias) < (b ^ bias);
+}
+
+// a precedes b: smaller t, ties broken by (inst_id, inner_inst_id…, prim_id).
+template <typename T>
+auto precedes(basic_hit_record<T> const& a, basic_hit_record<T> const& b) {
+    if constexpr (simd::simd_width_v<T> == 1) {
+        if (a.t != b.t) return a.t < b.t;
+        if (a.inst_id != b.inst_id) return a.inst_id < b.inst_id;
+        if (a.inner_inst_id != b.inner_inst_id) return a.inner_inst_id < b.inner_inst_id;
+        return a.prim_id < b.prim_id;
+    } else {
+        auto less = id_less(a.prim_id, b.prim_id);
+        for (int k = max_instance_depth - 2; k >= 0; --k) {
+            auto const& ak = a.inner_inst_id[std::size_t(k)];
+            auto const& bk = b.inner_inst_id[std::size_t(k)];
+            less = id_less(ak, bk) | ((ak == bk) & less);
+        }
+        less = id_less(a.inst_id, b.inst_id) | ((a.inst_id == b.inst_id) & less);
+        return (a.t < b.t) | ((a.t == b.t) & less);
+    }
+}
+
+template <typename T>
+struct closest_query : instance_path {
+    basic_hit_record<T> best;
+
+    template <typename Ray>
+    bool report(basic_hit_record<T> hr, Ray& ray) {
+        if (simd::none(hr.hit)) return false;
+        stamp(hr);
+        auto const accept = hr.hit & precedes(hr, best);
+        if (simd::none(accept)) return false;
+        best = select(accept, hr, best);
+        ray.tmax = simd::select(accept, hr.t, ray.tmax);
+        return false;
+    }
+};
+
+template <typename T>
+struct any_query : instance_path {
+    basic_hit_record<T> found;
+    simd::mask_type_t<T> done{};
+
+    template <typename Ray>
+    bool report(basic_hit_record<T> hr, Ray& ray) {
+        if (simd::none(hr.hit)) return false;
+        stamp(hr);
+        if constexpr (simd::simd_width_v<T> == 1) {
+            found = hr;
+            return true;
+        } else {
+            auto const first = hr.hit & !done;
+            found = select(first, hr, found);
+            done = done | hr.hit;
+            // Finished lanes can hit nothing more.
+            ray.tmax = simd::select(done, T(-std::numeric_limits<simd::scalar_type_t<T>>::infinity()), ray.tmax);
+            return simd::all(done);
+        }
+    }
+};
+
+template <typename T, std::size_t N>
+struct multi_query : instance_path {
+    static_assert(simd::simd_width_v<T> == 1, "multi_hit takes scalar rays");
+    std::array<basic_hit_record<T>, N> hits{};
+    std::size_t count = 0;
+
+    template <typename Ray>
+    bool report(basic_hit_record<T> hr, Ray& ray) {
+        if (!hr.hit) return false;
+        stamp(hr);
+        if (count == N && !precedes(hr, hits[N - 1])) return false;
+        // Insertion into the sorted list, dropping the last one when full.
+        std::size_t i = count < N ? count++ : N - 1;
+        for (; i > 0 && precedes(hr, hits[i - 1]); --i) hits[i] = hits[i - 1];
+        hits[i] = hr;
+        if (count == N) ray.tmax = hits[N - 1].t;
+        return false;
+    }
+};
+
+// Lanes of a (packet) ray that take part: tmin ≤ tmax (fails for NaN).
+template <typename Ray>
+auto active_lanes(Ray const& ray) {
+    return ray.tmin <= ray.tmax;
+}
+
+template <typename Ray, typename It, typename I, typename Query>
+void run_query(Ray& ray, It first, It last, I& isect, Query& query) {
+    static_assert(instance_nesting_v<std::remove_cvref_t<decltype(*first)>> <= max_instance_depth,
+                  "instances nest deeper than hit records can report (max_instance_depth)");
+    for (; first != last; ++first)
+        if (call_hooks_or_descend(ray, *first, isect, query)) return;
+}
+
+} // namespace detail
+
+template <typename Ray, typename It, typename I = default_intersector>
+basic_hit_record<ray_value_t<Ray>> closest_hit(Ray const& ray, It first, It last, I&& isect = I{}) {
+    using T = ray_value_t<Ray>;
+    detail::closest_query<T> query;
+    Ray r = ray;
+    auto const active = detail::active_lanes(r);
+    if (simd::none(active)) return query.best;
+    if constexpr (simd::simd_width_v<T> > 1)
+        r.tmax = simd::select(active, r.tmax, T(-std::numeric_limits<simd::scalar_type_t<T>>::infinity()));
+    detail::run_query(r, first, last, isect, query);
+    return query.best;
+}
+
+template <typename Ray, typename It, typename I = default_intersector>
+basic_hit_record<ray_value_t<Ray>> any_hit(Ray const& ray, It first, It last, I&& isect = I{}) {
+    using T = ray_value_t<Ray>;
+    detail::any_query<T> query;
+    Ray r = ray;
+    auto const active = detail::active_lanes(r);
+    if (simd::none(active)) return query.found;
+    if constexpr (simd::simd_width_v<T> > 1) {
+        query.done = !active;
+        r.tmax = simd::select(active, r.tmax, T(-std::numeric_limits<simd::scalar_type_t<T>>::infinity()));
+    }
+    detail::run_query(r, first, last, isect, query);
+    return query.found;
+}
+
+// Up to N accepted hits sorted by t (ties as above); entries past the last hit have hit == false.
+template <std::size_t N, typename Ray, typename It, typename I = default_intersector>
+std::array<basic_hit_record<ray_value_t<Ray>>, N> multi_hit(Ray const& ray, It first, It last, I&& isect = I{}) {
+    static_assert(N > 0);
+    detail::multi_query<ray_value_t<Ray>, N> query;
+    Ray r = ray;
+    if (detail::active_lanes(r)) detail::run_query(r, first, last, isect, query);
+    return query.hits;
+}
+
+// The paper's ray/BVH test: closest hit in one BVH (or instance), with an optional intersector.
+template <typename T, typename Structure, typename I = default_intersector>
+    requires acceleration_structure<Structure>
+basic_hit_record<T> intersect(basic_ray<T> const& ray, Structure const& structure, I&& isect = I{}) {
+    return closest_hit(ray, &structure, &structure + 1, isect);
+}
+
+} // namespace canopy
