@@ -64,7 +64,8 @@ vec3<T> apply_affine(affine_transform<S> const& m, vec3<T> const& p, bool point)
 template <typename Ray, typename BVH, typename I, typename Query>
 bool traverse(Ray& ray, instance<BVH> const& inst, I& isect, Query& query) {
     if (inst.bvh == nullptr) return false;
-    Ray local = ray;
+    // A plain ray: constants cached for the outer frame do not hold in object space.
+    basic_ray<ray_value_t<Ray>> local = ray;
     if (!inst.identity) {
         local.origin = apply_affine(inst.world_to_object, ray.origin, true);
         local.direction = apply_affine(inst.world_to_object, ray.direction, false);

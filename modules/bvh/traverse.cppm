@@ -16,13 +16,13 @@ import :storage;
 
 export namespace canopy {
 
-// Traverses b; returns true when the query asked to stop (any-hit found, packet finished).
-template <typename Ray, typename Prim, typename I, typename Query>
-bool traverse(Ray& ray, bvh<Prim> const& b, I& isect, Query& query) {
-    using T = ray_value_t<Ray>;
+// Traverses b with a prepared ray; returns true when the query asked to stop (any-hit found,
+// packet finished).
+template <typename T, typename Prim, typename I, typename Query>
+bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
     if (b.nodes.empty()) return false;
 
-    vec3<T> const inv_dir(simd::rcp(ray.direction.x), simd::rcp(ray.direction.y), simd::rcp(ray.direction.z));
+    vec3<T> const& inv_dir = ray.inv_dir;
     auto const root = test_box(isect, ray, b.nodes[0].bounds, inv_dir);
     if (simd::none(root.hit)) return false;
 
@@ -74,6 +74,15 @@ bool traverse(Ray& ray, bvh<Prim> const& b, I& isect, Query& query) {
             }
         }
     }
+}
+
+// Traverses b with a plain ray (prepared here, once); ray.tmax is tightened as the query allows.
+template <typename T, typename Prim, typename I, typename Query>
+bool traverse(basic_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
+    prepared_ray<T> prepared(ray);
+    bool const stop = traverse(prepared, b, isect, query);
+    ray.tmax = prepared.tmax;
+    return stop;
 }
 
 } // namespace canopy

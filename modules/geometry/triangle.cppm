@@ -103,12 +103,28 @@ watertight_shear<T> make_watertight_shear(vec3<T> const& dir) {
     return s;
 }
 
-// Watertight ray/triangle test (the default).
+// A ray with its per-ray constants computed once: the watertight shear and the inverse
+// direction of the box test. Traversal hands these to hooks as their `Ray`; since it derives
+// from basic_ray, hooks read origin/direction/tmin/tmax as usual and `intersect(ray, tri)`
+// inside a hook picks up the cached shear. Results are bit-identical to a plain basic_ray.
+template <typename T>
+struct prepared_ray : basic_ray<T> {
+    prepared_ray() = default;
+    explicit prepared_ray(basic_ray<T> const& r)
+        : basic_ray<T>(r), shear(make_watertight_shear(r.direction)),
+          inv_dir(simd::rcp(r.direction.x), simd::rcp(r.direction.y), simd::rcp(r.direction.z)) {}
+
+    watertight_shear<T> shear;
+    vec3<T> inv_dir;
+};
+
+// Woop et al.'s test for a ray whose shear is already known.
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
-basic_hit_record<T> intersect(basic_ray<T> const& ray, basic_triangle<S> const& tri) {
+[[gnu::always_inline]] inline basic_hit_record<T> intersect_watertight(basic_ray<T> const& ray,
+                                                                       watertight_shear<T> const& shear,
+                                                                       basic_triangle<S> const& tri) {
     basic_hit_record<T> hr;
-    watertight_shear<T> const shear = make_watertight_shear(ray.direction);
 
     // Translate to the ray origin, permute, shear (each vertex on its own).
     vec3<T> const a = shear.permute(vec3<T>(tri.v0) - ray.origin);
@@ -134,6 +150,19 @@ basic_hit_record<T> intersect(basic_ray<T> const& ray, basic_triangle<S> const& 
 
     record_hit(hr, hit, t, ev / det, ew / det, tri.prim_id, tri.geom_id);
     return hr;
+}
+
+// Watertight ray/triangle test (the default).
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+basic_hit_record<T> intersect(basic_ray<T> const& ray, basic_triangle<S> const& tri) {
+    return intersect_watertight(ray, make_watertight_shear(ray.direction), tri);
+}
+
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+basic_hit_record<T> intersect(prepared_ray<T> const& ray, basic_triangle<S> const& tri) {
+    return intersect_watertight(ray, ray.shear, tri);
 }
 
 // Möller & Trumbore 1997, "Fast, Minimum Storage Ray/Triangle Intersection" (opt-in; not
