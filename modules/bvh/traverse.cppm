@@ -49,10 +49,11 @@ bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) 
                     right_first = simd::popcount(right.hit & (!left.hit | (right.tnear < left.tnear))) >
                                   simd::popcount(left.hit & (!right.hit | (left.tnear <= right.tnear)));
                 std::uint32_t const near = node.index + (right_first ? 1u : 0u);
+                std::uint32_t const far = node.index + (right_first ? 0u : 1u);
                 T const far_tnear = simd::select(right_first ? left.hit : right.hit,
                                                  right_first ? left.tnear : right.tnear,
                                                  T(std::numeric_limits<simd::scalar_type_t<T>>::infinity()));
-                stack[std::size_t(size++)] = {near ^ 1u, far_tnear};
+                stack[std::size_t(size++)] = {far, far_tnear};
                 current = near;
                 continue;
             }
