@@ -6,6 +6,7 @@ export module canopy.bvh;
 export import canopy.intersector;
 export import :storage;
 export import :parallel;
+export import :wide;
 export import :build;
 export import :traverse;
 export import :instance;

@@ -28,11 +28,22 @@ export import canopy.geometry;
 
 export namespace canopy {
 
+// A box type that only hooks written by the user accept (as `aabb const&` or generically): the
+// base class's forwarding operator() excludes it. Used in unevaluated checks only, to tell a
+// user's box hook from the inherited default (which lets traversal use its wide SIMD box test).
+template <typename S>
+struct box_hook_probe : basic_aabb<S> {};
+
+template <typename P>
+inline constexpr bool is_box_hook_probe_v = false;
+template <typename S>
+inline constexpr bool is_box_hook_probe_v<box_hook_probe<S>> = true;
+
 // CRTP base: forwards every test to the library's intersect(), found by ADL.
 template <typename Derived>
 struct basic_intersector {
     template <typename Ray, typename Prim, typename... Args>
-        requires requires(Ray const& ray, Prim const& prim, Args&&... args) {
+        requires(!is_box_hook_probe_v<Prim>) && requires(Ray const& ray, Prim const& prim, Args&&... args) {
             intersect(ray, prim, std::forward<Args>(args)...);
         }
     auto operator()(Ray const& ray, Prim const& prim, Args&&... args) {
@@ -63,11 +74,13 @@ concept primitive_hook_for = requires(I& isect, Ray const& ray, Prim const& prim
     { isect(ray, prim) };
 };
 
-// I intercepts ray/box tests (called with the precomputed inverse direction).
+// I has a ray/box hook of its own (called with the precomputed inverse direction), as opposed to
+// the forwarding one inherited from basic_intersector, which does not count.
 template <typename I, typename Ray, typename Box, typename InvDir>
-concept box_hook_for = requires(I& isect, Ray const& ray, Box const& box, InvDir const& inv_dir) {
-    { isect(ray, box, inv_dir) };
-};
+concept box_hook_for =
+    requires(I& isect, Ray const& ray, box_hook_probe<typename Box::value_type> const& box, InvDir const& inv_dir) {
+        { isect(ray, box, inv_dir) };
+    };
 
 // The ray/box test of the traversal: the intersector's hook if it has one, else the default.
 template <typename I, typename Ray, typename Box, typename InvDir>

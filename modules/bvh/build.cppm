@@ -21,6 +21,7 @@ export module canopy.bvh:build;
 import canopy.geometry;
 import :storage;
 import :parallel;
+import :wide;
 
 export namespace canopy {
 
@@ -34,7 +35,6 @@ struct bvh_build_options {
 
 namespace detail {
 
-inline constexpr int max_bins = 256;
 
 template <typename S>
 struct build_context {
@@ -90,12 +90,14 @@ void build_node(build_context<S>& ctx, std::uint32_t node_index, std::size_t beg
     double best_cost = std::numeric_limits<double>::infinity();
     int best_axis = -1, best_split = 0;
     double const parent_area = surface_area(bounds);
+    std::vector<bin<S>> b(static_cast<std::size_t>(bins));
+    std::vector<double> right_cost(static_cast<std::size_t>(bins));
     for (int axis = 0; axis < 3; ++axis) {
         S const lo = centroid_bounds.min[axis];
         S const extent = centroid_bounds.max[axis] - lo;
         if (!(extent > S(0))) continue;
         S const scale = S(bins) / extent;
-        std::array<bin<S>, max_bins> b{};
+        std::fill(b.begin(), b.end(), bin<S>{});
         for (std::size_t i = begin; i < end; ++i) {
             std::uint32_t const p = ctx.order[i];
             auto& bb = b[std::size_t(bin_index(ctx.centers[p][axis], lo, scale, bins))];
@@ -103,7 +105,6 @@ void build_node(build_context<S>& ctx, std::uint32_t node_index, std::size_t beg
             ++bb.count;
         }
         // Sweep from the right, then from the left; split k puts bins [0, k) left.
-        std::array<double, max_bins> right_cost{};
         basic_aabb<S> acc;
         std::size_t n = 0;
         for (int k = bins - 1; k > 0; --k) {
@@ -170,7 +171,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     if (n == 0) return result;
 
     options.max_leaf_size = std::max(options.max_leaf_size, 1);
-    options.bins = std::clamp(options.bins, 2, detail::max_bins);
+    options.bins = std::clamp(options.bins, 2, 256);
     options.max_depth = std::clamp(options.max_depth, 1, bvh_max_depth);
 
     detail::build_context<S> ctx;
@@ -191,6 +192,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     detail::build_node(ctx, 0, 0, n, 0);
     result.nodes.resize(ctx.node_count.load());
     result.depth = ctx.depth.load();
+    result.wide_nodes = collapse_to_wide(result.nodes);
 
     result.primitives.resize(n);
     parallel_for_chunks(n, 1024, [&](std::size_t first, std::size_t last) {

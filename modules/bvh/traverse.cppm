@@ -1,76 +1,148 @@
-// canopy.bvh:traverse — depth-first BVH traversal with the caller's intersector and query.
+// canopy.bvh:traverse — depth-first traversal of the 8-wide BVH with the caller's intersector
+// and query.
 //
-// Every ray/box test (root and both children of each visited inner node) goes through
-// test_box, every primitive through call_hooks_or_descend (canopy.intersector): hooks see every
-// test, nested BVHs/instances receive the same intersector and query. The nearer child is
-// visited first; stacked nodes whose entry distance lies beyond the query's current tmax are
-// skipped (closest-hit culling). Works for scalar and SIMD packet rays (a node is visited when
-// any active lane hits it).
+// Each visited node tests its children's boxes, nearest hit child first, the others pushed far to
+// near. Which box test runs is decided at compile time:
+// - the intersector has its own box hook → the hook, once per child box (it sees every test);
+// - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls);
+// - otherwise (double rays, packets) → the library's box test, once per child box.
+// All three compute the same conservative test (canopy.geometry:box): same hits, same order.
+// Every primitive goes through call_hooks_or_descend (canopy.intersector): nested BVHs and
+// instances receive the same intersector and query. Stacked entries whose entry distance lies
+// beyond the ray's current tmax are skipped (closest-hit culling). Packet rays visit a child
+// when any active lane hits it.
 module;
 #include <array>
+#include <bit>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 export module canopy.bvh:traverse;
 import canopy.intersector;
 import :storage;
 
 export namespace canopy {
 
+namespace detail {
+
+// Hit children of a wide node: bit i of mask set when child i is hit, entry distance in tnear[i]
+// (for packets: the smallest over the lanes that hit it).
+template <typename S>
+struct child_hits {
+    std::uint32_t mask = 0;
+    std::array<S, bvh_width> tnear;
+};
+
+// All eight child boxes against one scalar float ray at once; the same arithmetic as
+// canopy.geometry:box, lane by lane.
+[[gnu::always_inline]] inline child_hits<float> test_children_wide(prepared_ray<float> const& ray,
+                                                                   wide_bvh_node<float> const& node) {
+    using simd::float8;
+    constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
+    float8 tnear(ray.tmin), tfar(ray.tmax);
+    auto slab = [&](std::array<float, bvh_width> const& lo, std::array<float, bvh_width> const& hi, float origin,
+                    float inv) {
+        float8 const t0 = (float8::load(lo.data()) - float8(origin)) * float8(inv);
+        float8 const t1 = (float8::load(hi.data()) - float8(origin)) * float8(inv);
+        bool const negative = inv < 0.0f;
+        float8 const slab_near = negative ? t1 : t0;
+        float8 const slab_far = (negative ? t0 : t1) * float8(far_scale);
+        tnear = simd::max(slab_near, tnear);
+        tfar = simd::min(slab_far, tfar);
+    };
+    slab(node.min_x, node.max_x, ray.origin.x, ray.inv_dir.x);
+    slab(node.min_y, node.max_y, ray.origin.y, ray.inv_dir.y);
+    slab(node.min_z, node.max_z, ray.origin.z, ray.inv_dir.z);
+    child_hits<float> h;
+    h.mask = simd::movemask(tnear <= tfar);
+    tnear.store(h.tnear.data());
+    return h;
+}
+
+// Child boxes one at a time through test_box (hook or default).
+template <typename T, typename S, typename I>
+[[gnu::always_inline]] inline child_hits<S> test_children_each(prepared_ray<T> const& ray,
+                                                              wide_bvh_node<S> const& node, I& isect) {
+    child_hits<S> h;
+    for (int i = 0; i < bvh_width && node.used(i); ++i) {
+        auto const box = test_box(isect, ray, node.child_bounds(i), ray.inv_dir);
+        if (simd::none(box.hit)) continue;
+        h.mask |= 1u << i;
+        if constexpr (simd::simd_width_v<T> == 1)
+            h.tnear[std::size_t(i)] = box.tnear;
+        else
+            h.tnear[std::size_t(i)] =
+                simd::reduce_min(simd::select(box.hit, box.tnear, T(std::numeric_limits<S>::infinity())));
+    }
+    return h;
+}
+
+template <typename T, typename S, typename I>
+[[gnu::always_inline]] inline child_hits<S> test_children(prepared_ray<T> const& ray, wide_bvh_node<S> const& node,
+                                                          I& isect) {
+    if constexpr (std::is_same_v<T, float> && std::is_same_v<S, float> &&
+                  !box_hook_for<I, prepared_ray<T>, basic_aabb<S>, vec3<T>>)
+        return test_children_wide(ray, node);
+    else
+        return test_children_each(ray, node, isect);
+}
+
+// Largest tmax over the lanes (inactive lanes hold -inf).
+template <typename T>
+auto widest_tmax(T const& tmax) {
+    if constexpr (simd::simd_width_v<T> == 1)
+        return tmax;
+    else
+        return simd::reduce_max(tmax);
+}
+
+} // namespace detail
+
 // Traverses b with a prepared ray; returns true when the query asked to stop (any-hit found,
-// packet finished).
+// packet finished). ray.tmax is tightened as the query allows.
 template <typename T, typename Prim, typename I, typename Query>
 bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
-    if (b.nodes.empty()) return false;
-
-    vec3<T> const& inv_dir = ray.inv_dir;
-    auto const root = test_box(isect, ray, b.nodes[0].bounds, inv_dir);
-    if (simd::none(root.hit)) return false;
+    using S = typename bvh<Prim>::value_type;
+    if (b.wide_nodes.empty()) return false;
 
     struct entry {
-        std::uint32_t node;
-        T tnear;
+        std::uint32_t child;
+        std::uint32_t count; // 0: wide node; ≥ 1: leaf
+        S tnear;
     };
-    std::array<entry, bvh_max_depth> stack;
+    std::array<entry, (bvh_width - 1) * bvh_max_depth + 1> stack;
     int size = 0;
-    std::uint32_t current = 0;
+    entry current{0, 0, S(0)};
     for (;;) {
-        auto const& node = b.nodes[current];
-        if (!node.is_leaf()) {
-            auto const left = test_box(isect, ray, b.nodes[node.index].bounds, inv_dir);
-            auto const right = test_box(isect, ray, b.nodes[node.index + 1].bounds, inv_dir);
-            bool const hit_left = simd::any(left.hit);
-            bool const hit_right = simd::any(right.hit);
-            if (hit_left && hit_right) {
-                // Nearer child first (packets: where more lanes see it nearer).
-                bool right_first;
-                if constexpr (simd::simd_width_v<T> == 1)
-                    right_first = right.tnear < left.tnear;
-                else
-                    right_first = simd::popcount(right.hit & (!left.hit | (right.tnear < left.tnear))) >
-                                  simd::popcount(left.hit & (!right.hit | (left.tnear <= right.tnear)));
-                std::uint32_t const near = node.index + (right_first ? 1u : 0u);
-                std::uint32_t const far = node.index + (right_first ? 0u : 1u);
-                T const far_tnear = simd::select(right_first ? left.hit : right.hit,
-                                                 right_first ? left.tnear : right.tnear,
-                                                 T(std::numeric_limits<simd::scalar_type_t<T>>::infinity()));
-                stack[std::size_t(size++)] = {far, far_tnear};
-                current = near;
-                continue;
-            }
-            if (hit_left || hit_right) {
-                current = node.index + (hit_left ? 0u : 1u);
+        if (current.count == 0) {
+            auto const& node = b.wide_nodes[current.child];
+            auto const hits = detail::test_children(ray, node, isect);
+            if (hits.mask != 0) {
+                // Order the hit children near to far (insertion sort of at most eight).
+                std::array<entry, bvh_width> order;
+                int n = 0;
+                for (std::uint32_t m = hits.mask; m != 0; m &= m - 1) {
+                    auto const i = std::size_t(std::countr_zero(m));
+                    entry const e{node.child[i], node.count[i], hits.tnear[i]};
+                    int j = n++;
+                    for (; j > 0 && e.tnear < order[std::size_t(j - 1)].tnear; --j)
+                        order[std::size_t(j)] = order[std::size_t(j - 1)];
+                    order[std::size_t(j)] = e;
+                }
+                for (int j = n - 1; j > 0; --j) stack[std::size_t(size++)] = order[std::size_t(j)];
+                current = order[0];
                 continue;
             }
         } else {
-            for (std::uint32_t i = node.index, end = node.index + node.count; i < end; ++i)
+            for (std::uint32_t i = current.child, end = current.child + current.count; i < end; ++i)
                 if (call_hooks_or_descend(ray, b.primitives[i], isect, query)) return true;
         }
-        // Pop the next node still in front of the ray's (possibly tightened) tmax.
+        // Pop the next entry still in front of the ray's (possibly tightened) tmax.
         for (;;) {
             if (size == 0) return false;
             entry const& e = stack[std::size_t(--size)];
-            if (simd::any(e.tnear <= ray.tmax)) {
-                current = e.node;
+            if (e.tnear <= detail::widest_tmax(ray.tmax)) {
+                current = e;
                 break;
             }
         }

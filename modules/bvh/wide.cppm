@@ -1,0 +1,85 @@
+// canopy.bvh:wide — collapses a binary BVH into the 8-wide layout that traversal walks.
+//
+// Each wide node takes the children of a binary node and keeps opening the inner child with the
+// largest surface area until it holds bvh_width children or only leaves (the greedy collapse of
+// Wald et al. 2008 / Embree). Leaves are kept as they are: every primitive stays in exactly one
+// leaf. The wide tree is never deeper than the binary one.
+module;
+#include <cstdint>
+#include <limits>
+#include <vector>
+export module canopy.bvh:wide;
+import canopy.geometry;
+import :storage;
+
+export namespace canopy {
+
+namespace detail {
+
+template <typename S>
+std::uint32_t collapse_node(std::vector<bvh_node<S>> const& nodes, std::uint32_t binary_index,
+                            std::vector<wide_bvh_node<S>>& wide) {
+    // Gather the children: start from the binary node's two, open the largest inner one.
+    std::uint32_t slots[bvh_width];
+    int n = 0;
+    if (nodes[binary_index].is_leaf()) {
+        slots[n++] = binary_index;
+    } else {
+        slots[n++] = nodes[binary_index].index;
+        slots[n++] = nodes[binary_index].index + 1;
+    }
+    while (n < bvh_width) {
+        int best = -1;
+        double best_area = -1.0;
+        for (int i = 0; i < n; ++i) {
+            auto const& c = nodes[slots[i]];
+            if (c.is_leaf()) continue;
+            double const area = surface_area(c.bounds);
+            if (area > best_area) {
+                best_area = area;
+                best = i;
+            }
+        }
+        if (best < 0) break;
+        std::uint32_t const opened = slots[best];
+        slots[best] = nodes[opened].index;
+        slots[n++] = nodes[opened].index + 1;
+    }
+
+    auto const index = std::uint32_t(wide.size());
+    wide.emplace_back();
+    {
+        auto& w = wide.back();
+        S const inf = std::numeric_limits<S>::infinity();
+        w.min_x.fill(inf), w.min_y.fill(inf), w.min_z.fill(inf);
+        w.max_x.fill(-inf), w.max_y.fill(-inf), w.max_z.fill(-inf);
+        w.child.fill(invalid_id);
+        w.count.fill(0);
+    }
+    for (int i = 0; i < n; ++i) {
+        auto const& c = nodes[slots[i]];
+        auto const k = std::size_t(i);
+        std::uint32_t child = c.index;
+        if (!c.is_leaf()) child = collapse_node(nodes, slots[i], wide);
+        auto& w = wide[index]; // collapse_node may have reallocated
+        w.min_x[k] = c.bounds.min.x, w.min_y[k] = c.bounds.min.y, w.min_z[k] = c.bounds.min.z;
+        w.max_x[k] = c.bounds.max.x, w.max_y[k] = c.bounds.max.y, w.max_z[k] = c.bounds.max.z;
+        w.child[k] = child;
+        w.count[k] = c.count;
+    }
+    return index;
+}
+
+} // namespace detail
+
+// The wide layout of a binary tree (empty for an empty tree).
+template <typename S>
+std::vector<wide_bvh_node<S>> collapse_to_wide(std::vector<bvh_node<S>> const& nodes) {
+    std::vector<wide_bvh_node<S>> wide;
+    if (nodes.empty()) return wide;
+    wide.reserve(nodes.size() / 4 + 1);
+    detail::collapse_node(nodes, 0, wide);
+    return wide;
+}
+
+} // namespace canopy
