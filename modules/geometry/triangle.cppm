@@ -161,7 +161,7 @@ basic_hit_record<T> intersect(basic_ray<T> const& ray, basic_triangle<S> const& 
 
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
-basic_hit_record<T> intersect(prepared_ray<T> const& ray, basic_triangle<S> const& tri) {
+[[gnu::always_inline]] inline basic_hit_record<T> intersect(prepared_ray<T> const& ray, basic_triangle<S> const& tri) {
     return intersect_watertight(ray, ray.shear, tri);
 }
 
