@@ -480,6 +480,13 @@ TEST_CASE("transform_box of a scaled, translated unit box is its image widened b
     CHECK(canopy::ulp_distance(image.max.x, 3.f) <= 8);
     CHECK(canopy::ulp_distance(image.max.y, 1.f) <= 8);
     CHECK(is_empty(transform_box(t, aabb{})));
+
+    auto const t_double = affine_transform<double>::from_rows({2, 0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0});
+    basic_aabb<double> const image_double = transform_box(t_double, basic_aabb<double>{{0, 0, 0}, {1, 1, 1}});
+    CHECK(image_double.min.x <= 1);
+    CHECK(image_double.max.x >= 3);
+    CHECK(canopy::ulp_distance(image_double.min.x, 1.0) <= 8);
+    CHECK(canopy::ulp_distance(image_double.max.x, 3.0) <= 8);
 }
 
 // Boxes
