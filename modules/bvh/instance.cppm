@@ -49,26 +49,14 @@ basic_aabb<typename BVH::value_type> get_bounds(instance<BVH> const& inst) {
     return inst.identity ? inst.bvh->bounds() : transform_box(inst.object_to_world, inst.bvh->bounds());
 }
 
-// p' = M·p (+ translation for points), for scalar and SIMD vectors alike, in one fixed
-// evaluation order so that every ray width gets bit-identical object-space rays.
-template <typename T, typename S>
-vec3<T> apply_affine(affine_transform<S> const& m, vec3<T> const& p, bool point) {
-    vec3<S> const cx = m.transform_vector(vec3<S>(S(1), S(0), S(0)));
-    vec3<S> const cy = m.transform_vector(vec3<S>(S(0), S(1), S(0)));
-    vec3<S> const cz = m.transform_vector(vec3<S>(S(0), S(0), S(1)));
-    vec3<T> r = vec3<T>(cx) * p.x + vec3<T>(cy) * p.y + vec3<T>(cz) * p.z;
-    if (point) r = r + vec3<T>(m.translation);
-    return r;
-}
-
 template <typename Ray, typename BVH, typename I, typename Query>
 bool traverse(Ray& ray, instance<BVH> const& inst, I& isect, Query& query) {
     if (inst.bvh == nullptr) return false;
     // A plain ray: constants cached for the outer frame do not hold in object space.
     basic_ray<ray_value_t<Ray>> local = ray;
     if (!inst.identity) {
-        local.origin = apply_affine(inst.world_to_object, ray.origin, true);
-        local.direction = apply_affine(inst.world_to_object, ray.direction, false);
+        local.origin = inst.world_to_object.transform_point(ray.origin);
+        local.direction = inst.world_to_object.transform_vector(ray.direction);
     }
     query.enter_instance(inst.inst_id);
     bool const stop = traverse(local, *inst.bvh, isect, query);

@@ -16,6 +16,7 @@
 // watertight.
 module;
 #include <cstdint>
+#include <limits>
 #include <type_traits>
 #include <utility>
 export module canopy.geometry:triangle;
@@ -100,6 +101,9 @@ watertight_shear<T> make_watertight_shear(vec3<T> const& dir) {
     s.sx = d.x / d.z;
     s.sy = d.y / d.z;
     s.sz = T(1) / d.z;
+    // An infinite dominant component gives sz = 0 and would turn every t into 0: poison the
+    // shear so that such rays miss (a NaN edge function fails every comparison).
+    s.sx = simd::select(s.sz == T(0), T(std::numeric_limits<simd::scalar_type_t<T>>::quiet_NaN()), s.sx);
     return s;
 }
 
