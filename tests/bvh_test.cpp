@@ -1,0 +1,452 @@
+// Tests of canopy.bvh: the binned SAH builder's contract (every primitive once, ids, bounds,
+// depth, leaf sizes), statistics, instance bounds and degenerate inputs, each checked by walking
+// the tree independently of the library.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <vector>
+
+import canopy.query;
+
+namespace {
+
+using canopy::ray;
+using canopy::triangle;
+using canopy::vec3;
+using mesh_bvh = canopy::bvh<triangle>;
+
+constexpr float inf = std::numeric_limits<float>::infinity();
+
+struct random_source {
+    std::mt19937 engine;
+    explicit random_source(std::uint32_t seed) : engine(seed) {}
+    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
+    vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
+};
+
+std::vector<triangle> triangle_soup(random_source& rng, int count, float extent, float size) {
+    std::vector<triangle> soup;
+    for (int i = 0; i < count; ++i) {
+        vec3<float> const c = rng.point(-extent, extent);
+        // prim_id deliberately wrong: the builder must renumber; geom_id is the user's and is kept.
+        soup.push_back({c + rng.point(-size, size), c + rng.point(-size, size), c + rng.point(-size, size),
+                        std::uint32_t(12345), std::uint32_t(i % 7)});
+    }
+    return soup;
+}
+
+template <typename S>
+bool box_contains(canopy::basic_aabb<S> const& outer, canopy::basic_aabb<S> const& inner) {
+    for (int a = 0; a < 3; ++a)
+        if (!(outer.min[a] <= inner.min[a] && inner.max[a] <= outer.max[a])) return false;
+    return true;
+}
+
+bool same_vertices(triangle const& a, triangle const& b) {
+    auto const eq = [](vec3<float> p, vec3<float> q) { return p.x == q.x && p.y == q.y && p.z == q.z; };
+    return eq(a.v0, b.v0) && eq(a.v1, b.v1) && eq(a.v2, b.v2);
+}
+
+// What an independent walk from the root finds.
+struct walk_result {
+    std::size_t nodes_reached = 0;
+    std::size_t leaves = 0;
+    std::size_t max_leaf = 0;
+    int levels = 0;                       // node levels on the deepest path
+    std::vector<int> primitive_owners;    // how many leaves own each stored primitive
+    bool structure_ok = true;             // child/primitive indices in range, each node reached once
+    bool leaf_bounds_ok = true;           // a leaf's box holds its primitives' boxes
+    bool inner_bounds_ok = true;          // an inner node's box holds both children's boxes
+    double sah_cost = 0;                  // Σ area(node)/area(root) · (traversal or count · intersection)
+};
+
+template <typename Prim>
+walk_result walk(canopy::bvh<Prim> const& b, canopy::sah_costs costs = {}) {
+    walk_result w;
+    w.primitive_owners.assign(b.primitives.size(), 0);
+    if (b.nodes.empty()) return w;
+    std::vector<int> reached(b.nodes.size(), 0);
+    double const root_area = double(surface_area(b.nodes[0].bounds));
+    struct item {
+        std::uint32_t node;
+        int level;
+    };
+    std::vector<item> stack{{0, 1}};
+    while (!stack.empty()) {
+        item const it = stack.back();
+        stack.pop_back();
+        if (it.node >= b.nodes.size() || reached[it.node]++) {
+            w.structure_ok = false;
+            continue;
+        }
+        ++w.nodes_reached;
+        w.levels = std::max(w.levels, it.level);
+        auto const& node = b.nodes[it.node];
+        double const rel = root_area > 0 ? double(surface_area(node.bounds)) / root_area : 1.0;
+        if (node.count > 0) {
+            ++w.leaves;
+            w.max_leaf = std::max<std::size_t>(w.max_leaf, node.count);
+            w.sah_cost += rel * double(costs.intersection) * double(node.count);
+            if (std::size_t(node.index) + node.count > b.primitives.size()) {
+                w.structure_ok = false;
+                continue;
+            }
+            for (std::uint32_t i = node.index; i < node.index + node.count; ++i) {
+                ++w.primitive_owners[i];
+                w.leaf_bounds_ok = w.leaf_bounds_ok && box_contains(node.bounds, get_bounds(b.primitives[i]));
+            }
+        } else {
+            w.sah_cost += rel * double(costs.traversal);
+            if (std::size_t(node.index) + 1 >= b.nodes.size()) {
+                w.structure_ok = false;
+                continue;
+            }
+            w.inner_bounds_ok = w.inner_bounds_ok && box_contains(node.bounds, b.nodes[node.index].bounds) &&
+                                box_contains(node.bounds, b.nodes[node.index + 1].bounds);
+            stack.push_back({node.index, it.level + 1});
+            stack.push_back({node.index + 1, it.level + 1});
+        }
+    }
+    return w;
+}
+
+// What an independent walk of the 8-wide tree (the layout traversal uses) finds.
+struct wide_walk_result {
+    std::size_t nodes_reached = 0;
+    int levels = 0;
+    std::vector<int> primitive_owners;
+    bool structure_ok = true;    // indices in range, each node reached once, used slots first
+    bool unused_ok = true;       // unused slots: empty box, count 0, child invalid_id
+    bool bounds_ok = true;       // a slot's box holds its leaf's primitives or its node's slots
+    canopy::aabb root_union;     // union of the root's slot boxes
+};
+
+template <typename Prim>
+wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
+    wide_walk_result w;
+    w.primitive_owners.assign(b.primitives.size(), 0);
+    if (b.wide_nodes.empty()) return w;
+    std::vector<int> reached(b.wide_nodes.size(), 0);
+    struct item {
+        std::uint32_t node;
+        int level;
+    };
+    std::vector<item> stack{{0, 1}};
+    while (!stack.empty()) {
+        item const it = stack.back();
+        stack.pop_back();
+        if (it.node >= b.wide_nodes.size() || reached[it.node]++) {
+            w.structure_ok = false;
+            continue;
+        }
+        ++w.nodes_reached;
+        w.levels = std::max(w.levels, it.level);
+        auto const& node = b.wide_nodes[it.node];
+        bool seen_unused = false;
+        for (int i = 0; i < canopy::bvh_width; ++i) {
+            auto const k = std::size_t(i);
+            auto const box = node.child_bounds(i);
+            if (it.node == 0) w.root_union = extend(w.root_union, box);
+            if (!node.used(i)) {
+                seen_unused = true;
+                w.unused_ok = w.unused_ok && node.count[k] == 0 && canopy::is_empty(box);
+                continue;
+            }
+            w.structure_ok = w.structure_ok && !seen_unused;
+            if (node.count[k] > 0) {
+                if (std::size_t(node.child[k]) + node.count[k] > b.primitives.size()) {
+                    w.structure_ok = false;
+                    continue;
+                }
+                for (std::uint32_t p = node.child[k]; p < node.child[k] + node.count[k]; ++p) {
+                    ++w.primitive_owners[p];
+                    w.bounds_ok = w.bounds_ok && box_contains(box, get_bounds(b.primitives[p]));
+                }
+            } else {
+                if (node.child[k] >= b.wide_nodes.size()) {
+                    w.structure_ok = false;
+                    continue;
+                }
+                auto const& child = b.wide_nodes[node.child[k]];
+                for (int j = 0; j < canopy::bvh_width; ++j)
+                    if (child.used(j)) w.bounds_ok = w.bounds_ok && box_contains(box, child.child_bounds(j));
+                stack.push_back({node.child[k], it.level + 1});
+            }
+        }
+    }
+    return w;
+}
+
+template <typename Prim>
+void check_wide_tree(canopy::bvh<Prim> const& b) {
+    wide_walk_result const w = walk_wide(b);
+    CHECK(w.structure_ok);
+    CHECK(w.unused_ok);
+    CHECK(w.bounds_ok);
+    CHECK(w.nodes_reached == b.wide_nodes.size());
+    CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n == 1; }));
+    CHECK(w.levels <= b.depth);
+    CHECK(box_contains(w.root_union, b.bounds()));
+    CHECK(box_contains(b.bounds(), w.root_union));
+}
+
+// The full builder contract for an input whose centroids are distinct.
+void check_build_contract(std::vector<triangle> const& input, mesh_bvh const& b, canopy::bvh_build_options const& options) {
+    REQUIRE(b.primitives.size() == input.size());
+    // prim_id = index in the input; each input primitive appears exactly once, unchanged.
+    std::vector<int> seen(input.size(), 0);
+    bool ids_ok = true;
+    for (auto const& p : b.primitives) {
+        if (p.prim_id >= input.size()) {
+            ids_ok = false;
+            continue;
+        }
+        ++seen[p.prim_id];
+        ids_ok = ids_ok && same_vertices(p, input[p.prim_id]) && p.geom_id == input[p.prim_id].geom_id;
+    }
+    CHECK(ids_ok);
+    CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
+
+    walk_result const w = walk(b);
+    CHECK(w.structure_ok);
+    CHECK(w.nodes_reached == b.nodes.size());
+    CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n == 1; }));
+    CHECK(w.leaf_bounds_ok);
+    CHECK(w.inner_bounds_ok);
+    CHECK(w.levels == b.depth);
+    CHECK(b.depth <= options.max_depth);
+    CHECK(w.max_leaf <= std::size_t(options.max_leaf_size));
+    CHECK(w.leaves * 2 - 1 == b.nodes.size());
+    // The root box is the union of the primitives' boxes.
+    canopy::aabb all;
+    for (auto const& p : input) all = extend(all, get_bounds(p));
+    CHECK(box_contains(b.bounds(), all));
+    CHECK(box_contains(all, b.bounds()));
+    check_wide_tree(b);
+}
+
+} // namespace
+
+TEST_CASE("build_binned_sah keeps every primitive once, numbers them by input index, and bounds them") {
+    random_source rng(1);
+    auto const soup = triangle_soup(rng, 2000, 10.0f, 1.0f);
+    std::vector<canopy::bvh_build_options> const variants{
+        {},
+        {.max_leaf_size = 1},
+        {.max_leaf_size = 8, .bins = 2},
+        {.max_leaf_size = 2, .bins = 256, .costs = {.traversal = 0.25f, .intersection = 2.0f}},
+        {.max_leaf_size = 4, .bins = 16, .parallel_threshold = 16},   // parallel subtree builds
+        {.max_leaf_size = 4, .bins = 8, .costs = {.traversal = 10.0f, .intersection = 1.0f}},
+    };
+    for (std::size_t i = 0; i < variants.size(); ++i) {
+        INFO("options #" << i);
+        mesh_bvh const b = canopy::build_binned_sah(soup, variants[i]);
+        check_build_contract(soup, b, variants[i]);
+    }
+}
+
+TEST_CASE("build_binned_sah respects max_depth, where leaves may exceed max_leaf_size") {
+    random_source rng(2);
+    auto const soup = triangle_soup(rng, 500, 10.0f, 1.0f);
+    for (int max_depth : {1, 2, 3, 6}) {
+        INFO("max_depth " << max_depth);
+        canopy::bvh_build_options const options{.max_leaf_size = 2, .max_depth = max_depth};
+        mesh_bvh const b = canopy::build_binned_sah(soup, options);
+        walk_result const w = walk(b);
+        CHECK(w.structure_ok);
+        CHECK(w.levels == b.depth);
+        CHECK(b.depth <= max_depth);
+        CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n == 1; }));
+        CHECK(w.leaf_bounds_ok);
+        CHECK(w.inner_bounds_ok);
+        if (max_depth == 1) CHECK(b.nodes.size() == 1);
+        check_wide_tree(b);
+    }
+    // The default depth limit is met by a deep input too (a geometric progression of sizes).
+    std::vector<triangle> nested;
+    for (int i = 0; i < 300; ++i) {
+        float const x = std::ldexp(1.0f, -i / 3);
+        nested.push_back({{x, 0, 0}, {x, x, 0}, {x, 0, x}});
+    }
+    mesh_bvh const deep = canopy::build_binned_sah(nested, {.max_leaf_size = 1});
+    CHECK(deep.depth <= canopy::bvh_max_depth);
+    CHECK(walk(deep).structure_ok);
+}
+
+TEST_CASE("an empty input gives an empty BVH, and queries on it miss") {
+    std::vector<triangle> const none;
+    mesh_bvh const b = canopy::build_binned_sah(none);
+    CHECK(b.empty());
+    CHECK(b.nodes.empty());
+    CHECK(b.wide_nodes.empty());
+    CHECK(b.primitives.empty());
+    CHECK(canopy::is_empty(b.bounds()));
+    auto const s = canopy::compute_stats(b);
+    CHECK(s.node_count == 0);
+    CHECK(s.leaf_count == 0);
+    CHECK(s.primitive_count == 0);
+    CHECK(s.bytes == 0);
+    ray const r{{0, 0, -5}, 0, {0, 0, 1}, inf};
+    CHECK_FALSE(canopy::closest_hit(r, &b, &b + 1).hit);
+    CHECK_FALSE(canopy::any_hit(r, &b, &b + 1).hit);
+    CHECK_FALSE(canopy::multi_hit<3>(r, &b, &b + 1)[0].hit);
+    CHECK_FALSE(canopy::intersect(r, b).hit);
+    CHECK_FALSE(canopy::closest_hit(r, none.begin(), none.end()).hit);
+    // An instance of an empty BVH, inside a BVH: empty bounds, no hit.
+    std::vector<canopy::instance<mesh_bvh>> const inst{canopy::instance<mesh_bvh>(b, canopy::affine_transform<float>::identity(), 3)};
+    CHECK(canopy::is_empty(get_bounds(inst[0])));
+    auto const top = canopy::build_binned_sah(inst);
+    CHECK_FALSE(canopy::closest_hit(r, &top, &top + 1).hit);
+    CHECK_FALSE(canopy::any_hit(r, inst.begin(), inst.end()).hit);
+}
+
+TEST_CASE("compute_stats is consistent with the tree") {
+    random_source rng(3);
+    auto const soup = triangle_soup(rng, 1000, 10.0f, 1.0f);
+    for (int leaf : {1, 4, 8}) {
+        mesh_bvh const b = canopy::build_binned_sah(soup, {.max_leaf_size = leaf});
+        canopy::sah_costs const costs{.traversal = 1.5f, .intersection = 0.5f};
+        auto const s = canopy::compute_stats(b, costs);
+        walk_result const w = walk(b, costs);
+        INFO("max_leaf_size " << leaf);
+        CHECK(s.node_count == b.nodes.size());
+        CHECK(s.leaf_count == w.leaves);
+        CHECK(s.leaf_count * 2 - 1 == s.node_count);
+        CHECK(s.primitive_count == soup.size());
+        CHECK(s.depth == b.depth);
+        CHECK(s.max_leaf_size == w.max_leaf);
+        CHECK(s.max_leaf_size <= std::size_t(leaf));
+        CHECK(s.wide_node_count == b.wide_nodes.size());
+        CHECK(s.bytes == b.nodes.size() * sizeof(mesh_bvh::node_type) +
+                             b.wide_nodes.size() * sizeof(canopy::wide_bvh_node<float>) + soup.size() * sizeof(triangle));
+        CHECK(s.bytes_per_primitive == Approx(double(s.bytes) / double(soup.size())));
+        CHECK(s.sah_cost == Approx(w.sah_cost).epsilon(1e-9));
+        // At least the root's traversal, at most testing everything at every level.
+        CHECK(s.sah_cost >= costs.traversal);
+        CHECK(s.sah_cost <= double(costs.traversal) * double(s.node_count) + double(costs.intersection) * double(soup.size()) * (b.depth + 1));
+    }
+    // A single primitive: one leaf, depth 1.
+    mesh_bvh const single = canopy::build_binned_sah(std::vector<triangle>{triangle{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 9}});
+    auto const s = canopy::compute_stats(single);
+    CHECK(s.node_count == 1);
+    CHECK(s.leaf_count == 1);
+    CHECK(s.depth == 1);
+    CHECK(single.primitives[0].prim_id == 0u);
+}
+
+TEST_CASE("coincident centroids build without crashing and split by index") {
+    // 300 copies of one triangle: every centroid coincides.
+    std::vector<triangle> const copies(300, triangle{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 0, 5});
+    mesh_bvh const b = canopy::build_binned_sah(copies, {.max_leaf_size = 4});
+    walk_result const w = walk(b);
+    CHECK(w.structure_ok);
+    CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n == 1; }));
+    CHECK(w.max_leaf <= 4);
+    CHECK(b.depth <= canopy::bvh_max_depth);
+    check_wide_tree(b);
+    std::vector<int> seen(copies.size(), 0);
+    for (auto const& p : b.primitives) ++seen[p.prim_id];
+    CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
+    // All copies are hit at the same t: the smallest prim_id wins, multi_hit lists them in order.
+    ray const r{{0.25f, 0.25f, 3}, 0, {0, 0, -1}, inf};
+    auto const hr = canopy::closest_hit(r, &b, &b + 1);
+    REQUIRE(hr.hit);
+    CHECK(hr.prim_id == 0u);
+    CHECK(hr.t == 3.0f);
+    auto const many = canopy::multi_hit<5>(r, &b, &b + 1);
+    for (std::uint32_t i = 0; i < 5; ++i) {
+        CHECK(many[i].hit);
+        CHECK(many[i].prim_id == i);
+    }
+    // Half the copies elsewhere: two clusters of coincident centroids.
+    std::vector<triangle> two = copies;
+    for (std::size_t i = 0; i < two.size(); i += 2) two[i].v0.z = two[i].v1.z = two[i].v2.z = 1;
+    check_build_contract(two, canopy::build_binned_sah(two, {}), {});
+}
+
+TEST_CASE("non-finite vertices do not crash the builder") {
+    random_source rng(4);
+    auto soup = triangle_soup(rng, 200, 5.0f, 1.0f);
+    soup[3].v1.x = std::numeric_limits<float>::quiet_NaN();
+    soup[50].v2 = vec3<float>(std::numeric_limits<float>::quiet_NaN());
+    soup[51].v0.y = inf;
+    mesh_bvh const b = canopy::build_binned_sah(soup);
+    walk_result const w = walk(b);
+    CHECK(w.structure_ok);
+    CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n == 1; }));
+    wide_walk_result const ww = walk_wide(b);
+    CHECK(ww.structure_ok);
+    CHECK(std::all_of(ww.primitive_owners.begin(), ww.primitive_owners.end(), [](int n) { return n == 1; }));
+    std::vector<int> seen(soup.size(), 0);
+    for (auto const& p : b.primitives) ++seen[p.prim_id];
+    CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
+}
+
+TEST_CASE("BVHs over spheres and over BVHs satisfy the same contract") {
+    random_source rng(5);
+    std::vector<canopy::sphere> spheres;
+    for (int i = 0; i < 700; ++i) spheres.push_back({rng.point(-10, 10), rng.uniform(0.05f, 1.0f)});
+    auto const b = canopy::build_binned_sah(spheres);
+    walk_result const w = walk(b);
+    CHECK(w.structure_ok);
+    CHECK(w.leaf_bounds_ok);
+    CHECK(w.inner_bounds_ok);
+    CHECK(w.max_leaf <= 4);
+    std::vector<int> seen(spheres.size(), 0);
+    for (auto const& p : b.primitives) ++seen[p.prim_id];
+    CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
+    check_wide_tree(b);
+
+    std::vector<mesh_bvh> parts;
+    for (int k = 0; k < 5; ++k) parts.push_back(canopy::build_binned_sah(triangle_soup(rng, 100, 3.0f, 0.5f)));
+    auto const roots = canopy::build_binned_sah(parts);
+    walk_result const wr = walk(roots);
+    CHECK(wr.structure_ok);
+    CHECK(wr.leaf_bounds_ok);
+    CHECK(wr.inner_bounds_ok);
+    CHECK(roots.primitives.size() == 5);
+    check_wide_tree(roots);
+}
+
+TEST_CASE("instance bounds hold the transformed geometry") {
+    random_source rng(6);
+    auto const soup = triangle_soup(rng, 300, 2.0f, 0.5f);
+    mesh_bvh const b = canopy::build_binned_sah(soup);
+    using mesh_instance = canopy::instance<mesh_bvh>;
+    CHECK(canopy::instance_nesting_v<triangle> == 0);
+    CHECK(canopy::instance_nesting_v<mesh_instance> == 1);
+    CHECK(canopy::instance_nesting_v<canopy::instance<canopy::bvh<mesh_instance>>> == 2);
+
+    // Identity: the BVH's own bounds.
+    mesh_instance const id(b, canopy::affine_transform<float>::identity(), 1);
+    auto const ib = get_bounds(id);
+    CHECK(box_contains(ib, b.bounds()));
+    CHECK(box_contains(b.bounds(), ib));
+
+    for (int k = 0; k < 20; ++k) {
+        std::array<float, 12> rows{};
+        for (auto& x : rows) x = rng.uniform(-2, 2);
+        auto const xf = canopy::affine_transform<float>::from_rows(rows);
+        mesh_instance const inst(b, xf, std::uint32_t(k));
+        auto const box = get_bounds(inst);
+        // Every vertex, transformed exactly (long double), lies in the instance's box.
+        bool inside = true;
+        for (auto const& tri : soup) {
+            for (vec3<float> const p : {tri.v0, tri.v1, tri.v2}) {
+                for (int row = 0; row < 3; ++row) {
+                    long double const x = (long double)rows[std::size_t(4 * row)] * p.x +
+                                          (long double)rows[std::size_t(4 * row + 1)] * p.y +
+                                          (long double)rows[std::size_t(4 * row + 2)] * p.z + rows[std::size_t(4 * row + 3)];
+                    inside = inside && box.min[row] <= x && x <= box.max[row];
+                }
+            }
+        }
+        CHECK(inside);
+        CHECK_FALSE(canopy::is_empty(box));
+    }
+}

@@ -1,0 +1,450 @@
+// Tests of canopy.intersector: the paper's custom intersectors (CRTP, lambdas, overload sets), the
+// fallback to the default tests, and that hooks reach every level of nested BVHs and instances.
+#include <catch2/catch.hpp>
+
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <utility>
+#include <vector>
+
+import canopy.query;
+
+using canopy::aabb;
+using canopy::basic_triangle;
+using canopy::intersect;
+
+// The paper's heat-map intersector (§4), with Canopy's names: counts ray/box and ray/triangle tests.
+struct bvh_costs : canopy::basic_intersector<bvh_costs> {
+    using canopy::basic_intersector<
+        bvh_costs
+    >::operator();
+
+    // Intercept and count ray/aabb tests
+    template <typename Ray, typename ...Args>
+    auto operator() (
+        Ray const& ray,
+        aabb const& box,
+        Args&&... args
+    )
+    {
+        ++num_boxes;
+        return intersect(
+            ray,
+            box,
+            std::forward<Args>(args)...
+        );
+    }
+
+    // Intercept and count ray/triangle tests
+    template <typename Ray>
+    auto operator() (
+        Ray const& ray,
+        basic_triangle<float> const& tri
+    )
+    {
+        ++num_tris;
+        return intersect(ray, tri);
+    }
+
+    unsigned num_boxes = 0;
+    unsigned num_tris = 0;
+};
+
+namespace {
+
+using canopy::ray;
+using canopy::triangle;
+using canopy::vec3;
+using mesh_bvh = canopy::bvh<triangle>;
+using mesh_instance = canopy::instance<mesh_bvh>;
+using two_level = canopy::bvh<mesh_instance>;
+using two_level_instance = canopy::instance<two_level>;
+using three_level = canopy::bvh<two_level_instance>;
+
+constexpr float inf = std::numeric_limits<float>::infinity();
+
+ray make_ray(vec3<float> origin, vec3<float> direction, float tmin = 0.0f, float tmax = inf) {
+    return {origin, tmin, direction, tmax};
+}
+
+struct random_source {
+    std::mt19937 engine;
+    explicit random_source(std::uint32_t seed) : engine(seed) {}
+    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
+    vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
+    vec3<float> point_in(canopy::aabb const& b) {
+        return {uniform(b.min.x, b.max.x), uniform(b.min.y, b.max.y), uniform(b.min.z, b.max.z)};
+    }
+};
+
+std::vector<triangle> triangle_soup(random_source& rng, int count, float extent, float size) {
+    std::vector<triangle> soup;
+    for (int i = 0; i < count; ++i) {
+        vec3<float> const c = rng.point(-extent, extent);
+        soup.push_back({c + rng.point(-size, size), c + rng.point(-size, size), c + rng.point(-size, size),
+                        std::uint32_t(i), std::uint32_t(i % 3)});
+    }
+    return soup;
+}
+
+// Rotation (random unit quaternion) × non-uniform scale, plus a translation.
+canopy::affine_transform<float> random_transform(random_source& rng, float translation) {
+    std::normal_distribution<double> normal;
+    double q[4];
+    double norm = 0;
+    for (double& c : q) {
+        c = normal(rng.engine);
+        norm += c * c;
+    }
+    for (double& c : q) c /= std::sqrt(norm);
+    double const w = q[0], x = q[1], y = q[2], z = q[3];
+    double const r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+                            {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+                            {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+    double const s[3] = {rng.uniform(0.5f, 2.0f), rng.uniform(0.5f, 2.0f), rng.uniform(0.5f, 2.0f)};
+    std::array<float, 12> rows{};
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) rows[std::size_t(4 * i + j)] = static_cast<float>(r[i][j] * s[j]);
+        rows[std::size_t(4 * i + 3)] = rng.uniform(-translation, translation);
+    }
+    return canopy::affine_transform<float>::from_rows(rows);
+}
+
+// Meshes, a two-level scene (instances of two meshes) and a three-level scene (instances of it).
+struct nested_scene {
+    std::vector<mesh_bvh> meshes;
+    std::vector<mesh_instance> level1;
+    two_level middle;
+    std::vector<two_level_instance> level2;
+    three_level top;
+
+    explicit nested_scene(std::uint32_t seed) {
+        random_source rng(seed);
+        meshes.push_back(canopy::build_binned_sah(triangle_soup(rng, 150, 1.0f, 0.4f)));
+        meshes.push_back(canopy::build_binned_sah(triangle_soup(rng, 120, 1.0f, 0.4f)));
+        for (std::uint32_t k = 0; k < 8; ++k)
+            level1.emplace_back(meshes[k % 2], random_transform(rng, 4.0f), 10 + k);
+        middle = canopy::build_binned_sah(level1);
+        for (std::uint32_t k = 0; k < 3; ++k) level2.emplace_back(middle, random_transform(rng, 6.0f), 100 + k);
+        top = canopy::build_binned_sah(level2);
+    }
+};
+
+std::vector<ray> random_rays(random_source& rng, canopy::aabb const& bounds, int count) {
+    vec3<float> const c = (bounds.min + bounds.max) * 0.5f;
+    float const r = canopy::length(bounds.max - bounds.min);
+    std::vector<ray> rays;
+    for (int i = 0; i < count; ++i) {
+        vec3<float> const origin = c + rng.point(-r, r);
+        rays.push_back(make_ray(origin, rng.point_in(bounds) - origin));
+    }
+    return rays;
+}
+
+template <typename H>
+bool same_record(H const& a, H const& b) {
+    auto const bits = [](float x) { return std::bit_cast<std::uint32_t>(x); };
+    return a.hit == b.hit && bits(a.t) == bits(b.t) && bits(a.u) == bits(b.u) && bits(a.v) == bits(b.v) &&
+           a.prim_id == b.prim_id && a.geom_id == b.geom_id && a.inst_id == b.inst_id &&
+           a.inner_inst_id == b.inner_inst_id;
+}
+
+template <typename H, std::size_t N>
+bool same_records(std::array<H, N> const& a, std::array<H, N> const& b) {
+    for (std::size_t i = 0; i < N; ++i)
+        if (!same_record(a[i], b[i])) return false;
+    return true;
+}
+
+template <typename... F>
+struct overload_set : F... {
+    using F::operator()...;
+};
+template <typename... F>
+overload_set(F...) -> overload_set<F...>;
+
+// Procedural checkerboard alpha: transparent where floor(8u) + floor(8v) is odd.
+bool opaque(float u, float v) {
+    auto const cell = [](float x) { return static_cast<int>(std::floor(8.0f * std::fmin(std::fmax(x, 0.0f), 1.0f))); };
+    return (cell(u) + cell(v)) % 2 == 0;
+}
+
+// The same alpha mask written with and without the using-declaration.
+struct alpha_mask : canopy::basic_intersector<alpha_mask> {
+    using canopy::basic_intersector<alpha_mask>::operator();
+    template <typename Ray>
+    auto operator()(Ray const& r, triangle const& tri) {
+        ++calls;
+        auto hr = intersect(r, tri);
+        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        return hr;
+    }
+    unsigned calls = 0;
+};
+
+struct alpha_mask_without_using : canopy::basic_intersector<alpha_mask_without_using> {
+    template <typename Ray>
+    auto operator()(Ray const& r, triangle const& tri) {
+        ++calls;
+        auto hr = intersect(r, tri);
+        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        return hr;
+    }
+    unsigned calls = 0;
+};
+
+// Only a box hook, and no using-declaration: triangles must still be tested by default.
+struct box_counter_without_using : canopy::basic_intersector<box_counter_without_using> {
+    template <typename Ray, typename... Args>
+    auto operator()(Ray const& r, aabb const& box, Args&&... args) {
+        ++calls;
+        return intersect(r, box, std::forward<Args>(args)...);
+    }
+    unsigned calls = 0;
+};
+
+// Three triangles stacked along z over the same square: a BVH of them is a single leaf.
+std::vector<triangle> stacked_triangles() {
+    return {triangle{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, triangle{{0, 0, 0.125f}, {1, 0, 0.125f}, {0, 1, 0.125f}},
+            triangle{{0, 0, 0.25f}, {1, 0, 0.25f}, {0, 1, 0.25f}}};
+}
+
+} // namespace
+
+TEST_CASE("bvh_costs from the paper counts every ray/box and ray/triangle test, at every level") {
+    auto const tris = stacked_triangles();
+    ray const through = make_ray({0.25f, 0.25f, 5}, {0, 0, -1});
+    ray const beside = make_ray({3, 3, 5}, {0, 0, -1});
+
+    SECTION("a range of primitives: one test per primitive, no boxes") {
+        bvh_costs costs;
+        auto const hr = canopy::closest_hit(through, tris.begin(), tris.end(), costs);
+        CHECK(hr.hit);
+        CHECK(costs.num_tris == 3);
+        CHECK(costs.num_boxes == 0);
+    }
+
+    mesh_bvh const leaf = canopy::build_binned_sah(tris);
+    REQUIRE(leaf.nodes.size() == 1);
+    auto const xf = canopy::affine_transform<float>::from_rows({0, -2, 0, 1, 1, 0, 0, -3, 0, 0, 0.5f, 2});
+    std::vector<mesh_instance> const one{mesh_instance(leaf, xf, 7)};
+    two_level const middle = canopy::build_binned_sah(one);
+    auto const xf2 = canopy::affine_transform<float>::from_rows({1, 0, 0, -4, 0, 1, 0, 0, 0, 0, 2, 1});
+    std::vector<two_level_instance> const two{two_level_instance(middle, xf2, 8)};
+    three_level const top = canopy::build_binned_sah(two);
+    // World-space images of the point (0.25, 0.25, ·) of the stacked triangles, and rays through them.
+    ray const through2 = make_ray(canopy::transform_point(xf, vec3<float>(0.25f, 0.25f, 5)),
+                                  canopy::transform_vector(xf, vec3<float>(0, 0, -1)));
+    ray const through3 = make_ray(canopy::transform_point(xf2, through2.origin), canopy::transform_vector(xf2, through2.direction));
+
+    SECTION("one BVH: the root box, then the leaf's triangles") {
+        bvh_costs costs;
+        CHECK(canopy::closest_hit(through, &leaf, &leaf + 1, costs).hit);
+        CHECK(costs.num_boxes == 1);
+        CHECK(costs.num_tris == 3);
+        bvh_costs missed;
+        CHECK_FALSE(canopy::closest_hit(beside, &leaf, &leaf + 1, missed).hit);
+        CHECK(missed.num_boxes == 1);
+        CHECK(missed.num_tris == 0);
+    }
+    SECTION("two levels: the instance BVH's root box and the mesh's root box") {
+        bvh_costs costs;
+        auto const hr = canopy::closest_hit(through2, &middle, &middle + 1, costs);
+        CHECK(hr.hit);
+        CHECK(hr.inst_id == 7u);
+        CHECK(costs.num_boxes == 2);
+        CHECK(costs.num_tris == 3);
+    }
+    SECTION("three levels: one root box per level") {
+        bvh_costs costs;
+        auto const hr = canopy::closest_hit(through3, &top, &top + 1, costs);
+        CHECK(hr.hit);
+        CHECK(hr.inst_id == 8u);
+        CHECK(hr.inner_inst_id[0] == 7u);
+        CHECK(costs.num_boxes == 3);
+        CHECK(costs.num_tris == 3);
+        bvh_costs any;
+        CHECK(canopy::any_hit(through3, &top, &top + 1, any).hit);
+        CHECK(any.num_boxes == 3);
+        CHECK(any.num_tris == 1);
+    }
+}
+
+TEST_CASE("bvh_costs counts equal those of an independently written overload set of lambdas") {
+    nested_scene const scene(21);
+    random_source rng(22);
+    auto check_counts = [&](auto const& structure, char const* name) {
+        unsigned boxes = 0, tris = 0;
+        auto counting = overload_set{
+            [&](ray const& r, aabb const& box, vec3<float> const& inv_dir) {
+                ++boxes;
+                return canopy::intersect(r, box, inv_dir);
+            },
+            [&](ray const& r, triangle const& tri) {
+                ++tris;
+                return canopy::intersect(r, tri);
+            }};
+        bvh_costs costs, any_costs;
+        unsigned hits = 0;
+        for (ray const& r : random_rays(rng, structure.bounds(), 400)) {
+            auto const a = canopy::closest_hit(r, &structure, &structure + 1, costs);
+            auto const b = canopy::closest_hit(r, &structure, &structure + 1, counting);
+            CHECK(same_record(a, b));
+            // Box hooks see every box test; without one the library tests boxes its own way:
+            // the hits must not differ.
+            CHECK(same_record(a, canopy::closest_hit(r, &structure, &structure + 1)));
+            hits += a.hit;
+            canopy::any_hit(r, &structure, &structure + 1, any_costs);
+        }
+        INFO(name);
+        CHECK(hits > 50);
+        CHECK(costs.num_boxes == boxes);
+        CHECK(costs.num_tris == tris);
+        CHECK(costs.num_tris > 0);
+        CHECK(any_costs.num_tris > 0);
+        CHECK(any_costs.num_tris <= costs.num_tris);
+        // Any-hit in the same structure again, counted by the lambdas.
+        boxes = tris = 0;
+        rng = random_source(23);
+        bvh_costs again;
+        for (ray const& r : random_rays(rng, structure.bounds(), 200)) {
+            canopy::any_hit(r, &structure, &structure + 1, again);
+            canopy::any_hit(r, &structure, &structure + 1, counting);
+        }
+        CHECK(again.num_boxes == boxes);
+        CHECK(again.num_tris == tris);
+    };
+    check_counts(scene.meshes[0], "one BVH");
+    check_counts(scene.middle, "two levels");
+    check_counts(scene.top, "three levels");
+}
+
+TEST_CASE("forgetting the using-declaration still reaches every level, with default tests for the rest") {
+    nested_scene const scene(31);
+    random_source rng(32);
+    int hits = 0;
+    unsigned rejected_somewhere = 0, triangle_tests = 0;
+    for (ray const& r : random_rays(rng, scene.top.bounds(), 600)) {
+        alpha_mask with_using;
+        alpha_mask_without_using without_using;
+        bvh_costs costs;
+        auto const a = canopy::closest_hit(r, &scene.top, &scene.top + 1, with_using);
+        auto const b = canopy::closest_hit(r, &scene.top, &scene.top + 1, without_using);
+        CHECK(same_record(a, b));
+        // Without the using-declaration the hook still sees every triangle test.
+        CHECK(without_using.calls == with_using.calls);
+        triangle_tests += without_using.calls;
+        auto const c = canopy::closest_hit(r, &scene.top, &scene.top + 1, costs);
+        hits += c.hit;
+        rejected_somewhere += !same_record(a, c);
+        // A box hook alone: triangles fall back to the default test.
+        box_counter_without_using boxes_only;
+        bvh_costs box_reference;
+        auto const d = canopy::closest_hit(r, &scene.top, &scene.top + 1, boxes_only);
+        auto const e = canopy::closest_hit(r, &scene.top, &scene.top + 1, box_reference);
+        CHECK(same_record(c, d));
+        CHECK(same_record(c, e));
+        CHECK(boxes_only.calls == box_reference.num_boxes);
+        // Same for any_hit and multi_hit.
+        CHECK(same_record(canopy::any_hit(r, &scene.top, &scene.top + 1, alpha_mask{}),
+                          canopy::any_hit(r, &scene.top, &scene.top + 1, alpha_mask_without_using{})));
+        CHECK(same_records(canopy::multi_hit<4>(r, &scene.top, &scene.top + 1, alpha_mask{}),
+                           canopy::multi_hit<4>(r, &scene.top, &scene.top + 1, alpha_mask_without_using{})));
+    }
+    CHECK(hits > 100);
+    CHECK(triangle_tests > 1000);
+    CHECK(rejected_somewhere > 10);   // the alpha mask did act, through all three levels
+}
+
+TEST_CASE("a lambda is an intersector") {
+    random_source rng(41);
+    auto const soup = triangle_soup(rng, 1500, 5.0f, 1.0f);
+    mesh_bvh const b = canopy::build_binned_sah(soup);
+    unsigned calls = 0;
+    auto even_only = [&calls](auto const& r, triangle const& tri) {
+        ++calls;
+        auto hr = canopy::intersect(r, tri);
+        hr.hit = hr.hit && tri.prim_id % 2 == 0;
+        return hr;
+    };
+    int hits = 0;
+    for (ray const& r : random_rays(rng, b.bounds(), 1000)) {
+        // Brute force over the even triangles.
+        canopy::hit_record<ray, triangle> expected;
+        for (std::size_t i = 0; i < soup.size(); i += 2) {
+            auto const hr = canopy::intersect(r, soup[i]);
+            if (hr.hit && hr.t < expected.t) expected = hr;
+        }
+        auto const via_bvh = canopy::closest_hit(r, &b, &b + 1, even_only);
+        auto const via_range = canopy::closest_hit(r, soup.begin(), soup.end(), even_only);
+        CHECK(same_record(via_bvh, expected));
+        CHECK(same_record(via_range, expected));
+        hits += expected.hit;
+        auto const any = canopy::any_hit(r, &b, &b + 1, even_only);
+        CHECK(any.hit == expected.hit);
+        if (any.hit) CHECK(any.prim_id % 2 == 0);
+    }
+    CHECK(hits > 300);
+    CHECK(calls > 1500u);
+}
+
+TEST_CASE("default_intersector{} given explicitly gives the same results as no intersector") {
+    nested_scene const scene(51);
+    random_source rng(52);
+    std::vector<triangle> soup = triangle_soup(rng, 800, 4.0f, 1.0f);
+    mesh_bvh const b = canopy::build_binned_sah(soup);
+    auto check = [&](auto first, auto last, canopy::aabb const& bounds) {
+        for (ray const& r : random_rays(rng, bounds, 300)) {
+            CHECK(same_record(canopy::closest_hit(r, first, last), canopy::closest_hit(r, first, last, canopy::default_intersector{})));
+            CHECK(same_record(canopy::any_hit(r, first, last), canopy::any_hit(r, first, last, canopy::default_intersector{})));
+            CHECK(same_records(canopy::multi_hit<4>(r, first, last),
+                               canopy::multi_hit<4>(r, first, last, canopy::default_intersector{})));
+        }
+    };
+    check(soup.cbegin(), soup.cend(), b.bounds());
+    check(&b, &b + 1, b.bounds());
+    check(&scene.top, &scene.top + 1, scene.top.bounds());
+    check(scene.level1.cbegin(), scene.level1.cend(), scene.middle.bounds());
+    for (ray const& r : random_rays(rng, b.bounds(), 100)) {
+        canopy::default_intersector isect;
+        CHECK(same_record(canopy::intersect(r, b), canopy::intersect(r, b, isect)));
+        CHECK(same_record(canopy::intersect(r, b), canopy::closest_hit(r, &b, &b + 1)));
+    }
+}
+
+TEST_CASE("moller_trumbore_intersector gives the Möller–Trumbore results") {
+    random_source rng(61);
+    std::vector<triangle> soup = triangle_soup(rng, 1200, 5.0f, 1.0f);
+    mesh_bvh const b = canopy::build_binned_sah(soup);
+    int hits = 0;
+    for (ray const& r : random_rays(rng, b.bounds(), 1000)) {
+        canopy::hit_record<ray, triangle> expected;
+        for (auto const& tri : soup) {
+            auto const hr = canopy::intersect_moller_trumbore(r, tri);
+            if (hr.hit && (hr.t < expected.t || (hr.t == expected.t && hr.prim_id < expected.prim_id))) expected = hr;
+        }
+        hits += expected.hit;
+        CHECK(same_record(canopy::closest_hit(r, &b, &b + 1, canopy::moller_trumbore_intersector{}), expected));
+        CHECK(same_record(canopy::closest_hit(r, soup.begin(), soup.end(), canopy::moller_trumbore_intersector{}), expected));
+        CHECK(canopy::any_hit(r, &b, &b + 1, canopy::moller_trumbore_intersector{}).hit == expected.hit);
+    }
+    CHECK(hits > 300);
+}
+
+TEST_CASE("the intersector concepts detect the hooks an intersector provides") {
+    using inv_dir = vec3<float>;
+    STATIC_REQUIRE(canopy::acceleration_structure<mesh_bvh>);
+    STATIC_REQUIRE(canopy::acceleration_structure<mesh_instance>);
+    STATIC_REQUIRE(canopy::acceleration_structure<three_level>);
+    STATIC_REQUIRE_FALSE(canopy::acceleration_structure<triangle>);
+    STATIC_REQUIRE(canopy::primitive_hook_for<bvh_costs, ray, triangle>);
+    STATIC_REQUIRE(canopy::box_hook_for<bvh_costs, ray, aabb, inv_dir>);
+    STATIC_REQUIRE(canopy::primitive_hook_for<alpha_mask_without_using, ray, triangle>);
+    STATIC_REQUIRE_FALSE(canopy::box_hook_for<alpha_mask_without_using, ray, aabb, inv_dir>);
+    STATIC_REQUIRE(canopy::box_hook_for<box_counter_without_using, ray, aabb, inv_dir>);
+    STATIC_REQUIRE(canopy::primitive_hook_for<canopy::default_intersector, ray, canopy::sphere>);
+}
