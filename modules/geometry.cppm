@@ -1,6 +1,6 @@
 // canopy.geometry — primitives and their ray tests, found by ADL as `intersect(ray, prim)`:
 // triangles (watertight by default, Möller–Trumbore opt-in), spheres, the conservative ray/box
-// slab test, and hit_record. Every test works for float, double and SIMD packet rays.
+// slab test, hit_record, and robust secondary-ray origins (spawn_ray). Every test works for float, double and SIMD packet rays.
 //
 // A user-defined primitive joins the library by providing, in its own namespace:
 //   basic_aabb<S> get_bounds(P const&);                  (for BVH builds)
@@ -12,3 +12,4 @@ export import :hit_record;
 export import :box;
 export import :triangle;
 export import :sphere;
+export import :spawn;

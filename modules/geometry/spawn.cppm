@@ -1,0 +1,67 @@
+// canopy.geometry:spawn — secondary rays that do not re-hit the surface they leave.
+//
+// The origin is the barycentric hit point, pushed off the surface along the geometric normal
+// (flipped to the side the new ray goes to) by an offset proportional to the point's magnitude in
+// integer ulps, with a fixed epsilon near the origin: Wächter & Binder 2019, "A Fast and Robust
+// Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6. The new ray starts at tmin = 0.
+//
+// Points are in the triangle's own (object) space; for instanced geometry, transform the ray
+// afterwards or spawn from the world-space triangle.
+module;
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+export module canopy.geometry:spawn;
+import canopy.math;
+import :triangle;
+
+export namespace canopy {
+
+// p moved off the plane with normal n (any length, pointing to the side to leave to).
+inline vec3<float> offset_ray_origin(vec3<float> const& p, vec3<float> const& n) {
+    constexpr float origin = 1.0f / 32.0f;
+    constexpr float float_scale = 1.0f / 65536.0f;
+    constexpr float int_scale = 256.0f;
+    vec3<float> const unit = normalize(n);
+    vec3<float> out;
+    for (int k = 0; k < 3; ++k) {
+        float const pk = p[k], nk = unit[k];
+        auto const of = std::int32_t(int_scale * nk);
+        auto const bits = std::bit_cast<std::int32_t>(pk);
+        float const moved = std::bit_cast<float>(bits + (pk < 0.0f ? -of : of));
+        out[k] = std::fabs(pk) < origin ? pk + float_scale * nk : moved;
+    }
+    return out;
+}
+
+// Geometric normal of a triangle (right-handed winding v0 → v1 → v2), not normalised.
+template <typename T>
+vec3<T> geometric_normal(basic_triangle<T> const& tri) {
+    return cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
+}
+
+// The point with barycentric weights (u, v) for v1 and v2.
+template <typename T>
+vec3<T> surface_point(basic_triangle<T> const& tri, T u, T v) {
+    return lerp(tri.v0, tri.v1, tri.v2, u, v);
+}
+
+// A ray leaving the triangle at (u, v) in direction dir (not normalised), up to tmax.
+inline ray spawn_ray(triangle const& tri, float u, float v, vec3<float> const& dir,
+                     float tmax = std::numeric_limits<float>::infinity()) {
+    vec3<float> n = geometric_normal(tri);
+    if (dot(n, dir) < 0.0f) n = -n;
+    return {offset_ray_origin(surface_point(tri, u, v), n), 0.0f, dir, tmax};
+}
+
+// A ray from the triangle at (u, v) towards target, ending just before it (t in [0, 1)).
+inline ray spawn_ray_to(triangle const& tri, float u, float v, vec3<float> const& target) {
+    vec3<float> n = geometric_normal(tri);
+    vec3<float> const p = surface_point(tri, u, v);
+    if (dot(n, target - p) < 0.0f) n = -n;
+    vec3<float> const origin = offset_ray_origin(p, n);
+    return {origin, 0.0f, target - origin, next_float_down(1.0f)};
+}
+
+} // namespace canopy
