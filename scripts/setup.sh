@@ -13,7 +13,9 @@ apt_packages=(
   clang-19 clang-tools-19 libclang-rt-19-dev lld-19
   ninja-build pkg-config
   catch2
-  libtbb-dev libfmt-dev
+  libtbb-dev libfmt-dev libopenimageio-dev
+  libembree-dev
+  glmark2-data libcgal-demo
 )
 # The machine image ships Node.js with its own npm; Debian's npm would conflict with it.
 command -v npm >/dev/null 2>&1 || apt_packages+=(npm)

@@ -1,0 +1,66 @@
+// Implementation of canopy.image_io on OpenImageIO 2.4.
+module;
+#include <algorithm>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+#include <OpenImageIO/imageio.h>
+module canopy.image_io;
+
+namespace canopy {
+
+namespace {
+[[noreturn]] void fail(std::filesystem::path const& path, std::string const& what) {
+    throw image_error(path.string() + ": " + what);
+}
+} // namespace
+
+rgba_image read_image(std::filesystem::path const& path) {
+    if (!std::filesystem::exists(path)) fail(path, "no such file");
+    auto in = OIIO::ImageInput::open(path.string());
+    if (!in) fail(path, "cannot read image: " + OIIO::geterror());
+    OIIO::ImageSpec const& spec = in->spec();
+    if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) fail(path, "empty image");
+    if (spec.depth > 1) fail(path, "volume images are not supported");
+    int const channels = spec.nchannels;
+    std::vector<float> data(std::size_t(spec.width) * std::size_t(spec.height) * std::size_t(channels));
+    if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, data.data()))
+        fail(path, "cannot read pixels: " + in->geterror());
+    in->close();
+
+    rgba_image image;
+    image.width = spec.width;
+    image.height = spec.height;
+    image.pixels.resize(4 * std::size_t(spec.width) * std::size_t(spec.height));
+    for (std::size_t i = 0, n = std::size_t(spec.width) * std::size_t(spec.height); i < n; ++i) {
+        float const* src = data.data() + i * std::size_t(channels);
+        float* dst = image.pixels.data() + 4 * i;
+        if (channels >= 3) {
+            dst[0] = src[0], dst[1] = src[1], dst[2] = src[2];
+        } else {
+            dst[0] = dst[1] = dst[2] = src[0];
+        }
+        dst[3] = channels == 4 ? src[3] : channels == 2 ? src[1] : 1.0f;
+    }
+    return image;
+}
+
+void write_image(std::filesystem::path const& path, rgba_image const& image) {
+    if (image.width <= 0 || image.height <= 0 ||
+        image.pixels.size() != 4 * std::size_t(image.width) * std::size_t(image.height))
+        fail(path, "image to write has inconsistent size");
+    auto out = OIIO::ImageOutput::create(path.string());
+    if (!out) fail(path, "no image writer for this file type: " + OIIO::geterror());
+    std::string const ext = path.extension().string();
+    bool const eight_bit = ext == ".png" || ext == ".jpg" || ext == ".jpeg";
+    OIIO::ImageSpec spec(image.width, image.height, 4, eight_bit ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
+    std::vector<float> clamped(image.pixels);
+    if (eight_bit)
+        for (float& v : clamped) v = std::clamp(v, 0.0f, 1.0f);
+    if (!out->open(path.string(), spec)) fail(path, "cannot open for writing: " + out->geterror());
+    if (!out->write_image(OIIO::TypeDesc::FLOAT, clamped.data())) fail(path, "cannot write: " + out->geterror());
+    if (!out->close()) fail(path, "cannot finish writing: " + out->geterror());
+}
+
+} // namespace canopy
