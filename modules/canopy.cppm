@@ -6,3 +6,4 @@ export import canopy.geometry;
 export import canopy.intersector;
 export import canopy.bvh;
 export import canopy.query;
+export import canopy.render;

@@ -1,0 +1,223 @@
+// canopy.render — cameras, ray generation, a parallel tile scheduler and rendering kernels.
+//
+// Every kernel is a function template over the scene and the custom intersector (the paper's
+// "scheduling parameters"): the same kernel runs with no intersector, an alpha mask or a cost
+// counter. Each pixel owns a copy of the intersector prototype (counters are per pixel) and a
+// random sequence seeded by (seed, x, y, sample): images do not depend on the thread count or the
+// tile order.
+//
+// A scene usable by the kernels provides (S const& s, I& isect, ray r, hit h):
+//   s.closest_hit(r, isect) → basic_hit_record<float>     (world space)
+//   s.any_hit(r, isect)     → basic_hit_record<float>
+//   s.surface(h, r)         → surface_sample (world-space triangle, unit normal facing the ray,
+//                             albedo)
+//   s.background(r)         → vec3<float>
+module;
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <numbers>
+#include <vector>
+export module canopy.render;
+export import canopy.query;
+
+export namespace canopy {
+
+// ---- camera -----------------------------------------------------------------------------
+
+struct pinhole_camera {
+    vec3<float> eye;
+    vec3<float> forward; // unit, towards the image centre
+    vec3<float> right;   // scaled: half the image width at distance 1
+    vec3<float> up;      // scaled: half the image height at distance 1
+
+    // fovy in degrees; aspect = width / height.
+    static pinhole_camera look_at(vec3<float> eye, vec3<float> target, vec3<float> up_hint, float fovy, float aspect) {
+        pinhole_camera c;
+        c.eye = eye;
+        c.forward = normalize(target - eye);
+        vec3<float> const r = normalize(cross(c.forward, up_hint));
+        vec3<float> const u = cross(r, c.forward);
+        float const half_height = std::tan(fovy * std::numbers::pi_v<float> / 360.0f);
+        c.up = u * half_height;
+        c.right = r * (half_height * aspect);
+        return c;
+    }
+
+    // Ray through image position (px, py) in pixels, (0, 0) the top-left corner of the image.
+    ray primary_ray(float px, float py, int width, int height) const {
+        float const sx = 2.0f * px / float(width) - 1.0f;
+        float const sy = 1.0f - 2.0f * py / float(height);
+        return {eye, 0.0f, forward + right * sx + up * sy, std::numeric_limits<float>::infinity()};
+    }
+};
+
+// ---- images and scheduling --------------------------------------------------------------
+
+// Linear RGBA pixels, row 0 at the top.
+struct framebuffer {
+    int width = 0;
+    int height = 0;
+    std::vector<vec4<float>> pixels;
+
+    framebuffer() = default;
+    framebuffer(int w, int h) : width(w), height(h), pixels(std::size_t(w) * std::size_t(h)) {}
+    vec4<float>& at(int x, int y) { return pixels[std::size_t(y) * std::size_t(width) + std::size_t(x)]; }
+    vec4<float> const& at(int x, int y) const { return pixels[std::size_t(y) * std::size_t(width) + std::size_t(x)]; }
+};
+
+// Deterministic per-sample random numbers: a hash of (seed, x, y, sample, dimension).
+struct pixel_random {
+    std::uint32_t state;
+
+    pixel_random(std::uint32_t seed, int x, int y, int sample)
+        : state(hash(seed ^ hash(std::uint32_t(x) ^ hash(std::uint32_t(y) ^ hash(std::uint32_t(sample)))))) {}
+
+    // Uniform in [0, 1).
+    float next() {
+        state = hash(state + 0x9e3779b9u);
+        return float(state >> 8) * 0x1p-24f;
+    }
+
+    static std::uint32_t hash(std::uint32_t x) {
+        // Wellons' lowbias32.
+        x ^= x >> 16;
+        x *= 0x7feb352du;
+        x ^= x >> 15;
+        x *= 0x846ca68bu;
+        x ^= x >> 16;
+        return x;
+    }
+};
+
+struct tile_options {
+    int tile_size = 16;
+    // Called with the fraction done, from the worker that finished a tile (serialised).
+    std::function<void(float)> progress;
+};
+
+// Runs shade(x, y) → vec4 for every pixel, tiles in parallel on all cores (oneTBB).
+void render_tiles(framebuffer& fb, std::function<vec4<float>(int, int)> const& shade, tile_options const& options = {});
+
+// ---- surfaces and sampling ----------------------------------------------------------------
+
+struct surface_sample {
+    triangle world_triangle;   // the hit triangle in world space (for spawn_ray)
+    vec3<float> normal;        // unit geometric normal, facing the incoming ray
+    vec3<float> albedo;
+    float u = 0.0f, v = 0.0f;  // barycentrics of the hit
+};
+
+// Cosine-weighted direction around unit normal n (Malley's method).
+inline vec3<float> cosine_direction(vec3<float> const& n, float r1, float r2) {
+    float const phi = 2.0f * std::numbers::pi_v<float> * r1;
+    float const r = std::sqrt(r2);
+    vec3<float> const a = std::fabs(n.x) > 0.5f ? vec3<float>(0, 1, 0) : vec3<float>(1, 0, 0);
+    vec3<float> const t = normalize(cross(a, n));
+    vec3<float> const b = cross(n, t);
+    return t * (r * std::cos(phi)) + b * (r * std::sin(phi)) + n * std::sqrt(std::max(0.0f, 1.0f - r2));
+}
+
+// ---- kernels ------------------------------------------------------------------------------
+
+struct light_options {
+    vec3<float> sun_direction = normalize(vec3<float>(-0.4f, 1.0f, 0.5f)); // towards the sun
+    vec3<float> sun_colour{1.0f, 0.95f, 0.85f};
+    float ambient = 0.25f;
+};
+
+// Primary visibility: albedo lit by the sun with hard shadows (shadow rays go through the same
+// intersector, so alpha-masked surfaces cast masked shadows), plus ambient; sky where nothing is hit.
+template <typename Scene, typename I>
+vec4<float> primary_kernel(Scene const& scene, ray const& r, I isect, light_options const& light = {}) {
+    auto const hit = scene.closest_hit(r, isect);
+    if (!hit.hit) return vec4<float>(scene.background(r), 1.0f);
+    surface_sample const s = scene.surface(hit, r);
+    float const cos_sun = dot(s.normal, light.sun_direction);
+    vec3<float> colour = s.albedo * light.ambient;
+    if (cos_sun > 0.0f) {
+        ray const shadow = spawn_ray(s.world_triangle, s.u, s.v, light.sun_direction);
+        if (!scene.any_hit(shadow, isect).hit) colour = colour + s.albedo * light.sun_colour * cos_sun;
+    }
+    return vec4<float>(colour, 1.0f);
+}
+
+// Ambient occlusion: fraction of `samples` cosine-weighted rays of length `radius` that escape.
+template <typename Scene, typename I>
+vec4<float> ao_kernel(Scene const& scene, ray const& r, I isect, pixel_random& rng, int samples = 16,
+                      float radius = 1.0f) {
+    auto const hit = scene.closest_hit(r, isect);
+    if (!hit.hit) return vec4<float>(scene.background(r), 1.0f);
+    surface_sample const s = scene.surface(hit, r);
+    int open = 0;
+    for (int k = 0; k < samples; ++k) {
+        vec3<float> const d = cosine_direction(s.normal, rng.next(), rng.next());
+        open += !scene.any_hit(spawn_ray(s.world_triangle, s.u, s.v, d, radius), isect).hit;
+    }
+    float const a = float(open) / float(samples);
+    return {a, a, a, 1.0f};
+}
+
+// Path tracing: Lambertian surfaces, the sun as a directional light sampled at every bounce
+// (next-event estimation), the sky as environment light; `bounces` indirect bounces.
+template <typename Scene, typename I>
+vec4<float> path_kernel(Scene const& scene, ray r, I isect, pixel_random& rng, int bounces = 3,
+                        light_options const& light = {}) {
+    vec3<float> radiance, throughput(1.0f);
+    for (int depth = 0; depth <= bounces; ++depth) {
+        auto const hit = scene.closest_hit(r, isect);
+        if (!hit.hit) {
+            radiance = radiance + throughput * scene.background(r);
+            break;
+        }
+        surface_sample const s = scene.surface(hit, r);
+        float const cos_sun = dot(s.normal, light.sun_direction);
+        if (cos_sun > 0.0f && !scene.any_hit(spawn_ray(s.world_triangle, s.u, s.v, light.sun_direction), isect).hit)
+            radiance = radiance + throughput * s.albedo * light.sun_colour * cos_sun;
+        throughput = throughput * s.albedo;
+        r = spawn_ray(s.world_triangle, s.u, s.v, cosine_direction(s.normal, rng.next(), rng.next()));
+    }
+    return vec4<float>(radiance, 1.0f);
+}
+
+// The paper's cost counter: ray/box and ray/triangle tests, at every level of the scene.
+struct bvh_costs : basic_intersector<bvh_costs> {
+    using basic_intersector<bvh_costs>::operator();
+
+    template <typename Ray, typename... Args>
+    auto operator()(Ray const& ray, aabb const& box, Args&&... args) {
+        ++num_boxes;
+        return intersect(ray, box, std::forward<Args>(args)...);
+    }
+
+    template <typename Ray>
+    auto operator()(Ray const& ray, triangle const& tri) {
+        ++num_tris;
+        return intersect(ray, tri);
+    }
+
+    unsigned num_boxes = 0;
+    unsigned num_tris = 0;
+};
+
+// Heat-map colour of a cost relative to max_cost: blue → green → yellow → red.
+inline vec3<float> heat_colour(float cost, float max_cost) {
+    float const x = std::clamp(cost / max_cost, 0.0f, 1.0f);
+    vec3<float> const stops[4] = {{0.05f, 0.05f, 0.4f}, {0.1f, 0.7f, 0.2f}, {0.95f, 0.9f, 0.1f}, {0.9f, 0.1f, 0.05f}};
+    float const f = x * 3.0f;
+    int const i = std::min(int(f), 2);
+    return lerp(stops[i], stops[i + 1], f - float(i));
+}
+
+// ---- display ------------------------------------------------------------------------------
+
+// Linear → sRGB-encoded display value in [0, 1].
+inline float to_srgb(float linear) {
+    float const c = std::clamp(linear, 0.0f, 1.0f);
+    return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
+}
+
+} // namespace canopy
