@@ -1,12 +1,17 @@
 // canopy — the command-line program.
 //
+//   canopy render [SCENE] [-o OUT] [--size WxH] [--spp N] [--kernel primary|ao|path|heatmap]
+//                 [--intersector none|alpha|procedural|costs] [--threads N]
 //   canopy trace --scene FILE --rays FILE --query closest|any --out FILE
 //                [--intersector none|alpha] [--threads N]
 //   canopy info SCENE
 //
+// `canopy render` without a scene renders the built-in demo (instanced alpha-masked billboards)
+// into the four images of Figure 1 of the custom-intersector paper.
 // Scenes: .obj (the benchmark OBJ subset: one BVH, no top level) or .inst (one shared mesh,
 // instanced: a top-level BVH over instances). Rays and hits use the benchmark formats.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -20,12 +25,15 @@
 #include <string>
 #include <string_view>
 #include <vector>
+#include <unistd.h>
 #include <fmt/core.h>
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 import canopy;
 import canopy.bench_formats;
+import canopy.billboard_forest;
+import canopy.image_io;
 
 namespace {
 
@@ -42,6 +50,7 @@ struct usage_error : std::runtime_error {
 constexpr char const* main_usage =
     "usage: canopy <command> [options]\n"
     "commands:\n"
+    "  render  render the demo scene (no SCENE) or a scene file into PNG images\n"
     "  trace   trace a ray file against a scene, write a hit file\n"
     "  info    print scene and BVH statistics\n"
     "run 'canopy <command> --help' for the options of a command\n";
@@ -54,6 +63,20 @@ constexpr char const* trace_usage =
     "  --query KIND        closest: nearest accepted hit; any: first accepted hit\n"
     "  --out FILE          20-byte hits: t, prim, inst, u, v\n"
     "  --intersector KIND  none (default) or alpha: reject hits where floor(8u)+floor(8v) is odd\n"
+    "  --threads N         worker threads (default: all cores)\n";
+
+constexpr char const* render_usage =
+    "usage: canopy render [SCENE] [-o OUT] [--size WxH] [--spp N] [--kernel KIND]\n"
+    "                     [--intersector KIND] [--threads N]\n"
+    "  SCENE               .obj or .inst; without it, the built-in demo scene is rendered into the\n"
+    "                      four images of the paper's Figure 1 (alpha ignored, texture alpha mask,\n"
+    "                      procedural alpha mask, BVH cost heat map)\n"
+    "  -o OUT              output folder (default: out)\n"
+    "  --size WxH          image size (default 800x600)\n"
+    "  --spp N             samples per pixel (default 1; 16 for ao and path)\n"
+    "  --kernel KIND       primary (default), ao, path or heatmap\n"
+    "  --intersector KIND  none (default), alpha (texture mask; bench rule for .obj/.inst),\n"
+    "                      procedural (ring mask on masked materials) or costs (heat map)\n"
     "  --threads N         worker threads (default: all cores)\n";
 
 constexpr char const* info_usage = "usage: canopy info SCENE\n  SCENE: .obj or .inst\n";
@@ -168,6 +191,307 @@ int run_trace(std::span<char*> args) {
     return 0;
 }
 
+// ---- render ----------------------------------------------------------------------------------
+
+// The scene as the kernels see it, counting the rays traced.
+struct counting_scene {
+    canopy::compiled_scene const* scene;
+    mutable std::atomic<std::uint64_t>* rays;
+
+    template <typename I>
+    canopy::basic_hit_record<float> closest_hit(canopy::ray const& r, I& isect) const {
+        rays->fetch_add(1, std::memory_order_relaxed);
+        return scene->closest_hit(r, isect);
+    }
+    template <typename I>
+    canopy::basic_hit_record<float> any_hit(canopy::ray const& r, I& isect) const {
+        rays->fetch_add(1, std::memory_order_relaxed);
+        return scene->any_hit(r, isect);
+    }
+    canopy::surface_sample surface(canopy::basic_hit_record<float> const& hr, canopy::ray const& r) const {
+        return scene->surface(hr, r);
+    }
+    canopy::vec3<float> background(canopy::ray const& r) const { return scene->background(r); }
+};
+
+struct render_job {
+    std::string kernel = "primary";
+    std::string intersector = "none";
+    int width = 800, height = 600, spp = 1;
+    std::filesystem::path output;
+    canopy::pinhole_camera camera;
+};
+
+struct render_result {
+    double seconds = 0.0;
+    std::uint64_t rays = 0;
+};
+
+class progress_bar {
+public:
+    explicit progress_bar(std::string label) : label_(std::move(label)), enabled_(isatty(STDERR_FILENO) != 0) {}
+    void update(float fraction) {
+        if (!enabled_) return;
+        int const filled = int(fraction * 40.0f);
+        std::fprintf(stderr, "\r%-28s [%s%s] %3d%%", label_.c_str(), std::string(std::size_t(filled), '#').c_str(),
+                     std::string(std::size_t(40 - filled), ' ').c_str(), int(fraction * 100.0f));
+        if (fraction >= 1.0f) std::fputc('\n', stderr);
+    }
+
+private:
+    std::string label_;
+    bool enabled_;
+};
+
+canopy::rgba_image to_display(canopy::framebuffer const& fb, bool linear) {
+    canopy::rgba_image img;
+    img.width = fb.width;
+    img.height = fb.height;
+    img.pixels.resize(4 * fb.pixels.size());
+    for (std::size_t i = 0; i < fb.pixels.size(); ++i) {
+        auto const& p = fb.pixels[i];
+        img.pixels[4 * i + 0] = linear ? canopy::to_srgb(p.x) : p.x;
+        img.pixels[4 * i + 1] = linear ? canopy::to_srgb(p.y) : p.y;
+        img.pixels[4 * i + 2] = linear ? canopy::to_srgb(p.z) : p.z;
+        img.pixels[4 * i + 3] = 1.0f;
+    }
+    return img;
+}
+
+// Shades every pixel with kernel(ray, isect, rng) averaged over spp jittered samples.
+template <typename I, typename Kernel>
+canopy::framebuffer render_with(render_job const& job, I const& prototype, Kernel const& kernel, progress_bar& bar) {
+    canopy::framebuffer fb(job.width, job.height);
+    canopy::render_tiles(
+        fb,
+        [&](int x, int y) {
+            canopy::vec4<float> sum;
+            for (int s = 0; s < job.spp; ++s) {
+                canopy::pixel_random rng(1u, x, y, s);
+                float const jx = job.spp > 1 ? rng.next() : 0.5f, jy = job.spp > 1 ? rng.next() : 0.5f;
+                I isect = prototype;
+                sum = sum + kernel(job.camera.primary_ray(float(x) + jx, float(y) + jy, job.width, job.height), isect, rng);
+            }
+            return sum * (1.0f / float(job.spp));
+        },
+        {.tile_size = 16, .progress = [&](float f) { bar.update(f); }});
+    return fb;
+}
+
+template <typename I>
+canopy::framebuffer render_kernel(counting_scene const& scene, render_job const& job, I const& prototype,
+                                  progress_bar& bar) {
+    if (job.kernel == "ao")
+        return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
+            return canopy::ao_kernel(scene, r, isect, rng, 8, 2.0f);
+        }, bar);
+    if (job.kernel == "path")
+        return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
+            return canopy::path_kernel(scene, r, isect, rng, 3);
+        }, bar);
+    return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random&) {
+        return canopy::primary_kernel(scene, r, isect);
+    }, bar);
+}
+
+// The paper's bvh_costs counter composed with the scene's texture alpha mask: counts every
+// ray/box and ray/triangle test at every level while the mask decides the hits, so the heat map
+// shows the extra traversal that alpha-masked holes cause.
+struct masked_costs : canopy::basic_intersector<masked_costs> {
+    using canopy::basic_intersector<masked_costs>::operator();
+
+    template <typename Ray, typename... Args>
+    auto operator()(Ray const& ray, canopy::aabb const& box, Args&&... args) {
+        ++num_boxes;
+        return intersect(ray, box, std::forward<Args>(args)...);
+    }
+
+    template <typename Ray>
+    auto operator()(Ray const& ray, canopy::triangle const& tri) {
+        ++num_tris;
+        return mask(ray, tri);
+    }
+
+    canopy::texture_alpha_mask mask;
+    unsigned num_boxes = 0;
+    unsigned num_tris = 0;
+};
+
+// Heat map: box + triangle tests of each primary ray, scaled so that the 99th percentile is red.
+canopy::framebuffer render_heatmap(counting_scene const& scene, render_job const& job, progress_bar& bar) {
+    masked_costs prototype;
+    prototype.mask.scene = scene.scene;
+    canopy::framebuffer fb = render_with(job, prototype, [&](canopy::ray const& r, masked_costs& isect,
+                                                             canopy::pixel_random&) {
+        scene.closest_hit(r, isect);
+        return canopy::vec4<float>(float(isect.num_boxes + isect.num_tris), 0, 0, 1);
+    }, bar);
+    std::vector<float> costs;
+    costs.reserve(fb.pixels.size());
+    for (auto const& p : fb.pixels) costs.push_back(p.x);
+    auto const p99 = costs.begin() + std::ptrdiff_t(costs.size() * 99 / 100);
+    std::nth_element(costs.begin(), p99, costs.end());
+    float const scale = std::max(1.0f, *p99);
+    for (auto& p : fb.pixels) p = canopy::vec4<float>(canopy::heat_colour(p.x, scale), 1.0f);
+    return fb;
+}
+
+render_result render_image(canopy::compiled_scene const& scene, render_job const& job, bool bench_scene) {
+    std::atomic<std::uint64_t> rays{0};
+    counting_scene const counted{&scene, &rays};
+    progress_bar bar(job.output.filename().string());
+    auto const start = clock_type::now();
+    canopy::framebuffer fb;
+    bool linear = true;
+    if (job.kernel == "heatmap" || job.intersector == "costs") {
+        fb = render_heatmap(counted, job, bar);
+        linear = false;
+    } else if (job.intersector == "alpha" && bench_scene) {
+        fb = render_kernel(counted, job, canopy::bench_alpha_intersector{}, bar);
+    } else if (job.intersector == "alpha") {
+        canopy::texture_alpha_mask mask;
+        mask.scene = &scene;
+        fb = render_kernel(counted, job, mask, bar);
+    } else if (job.intersector == "procedural") {
+        canopy::procedural_alpha_mask mask;
+        mask.scene = &scene;
+        fb = render_kernel(counted, job, mask, bar);
+    } else {
+        fb = render_kernel(counted, job, canopy::default_intersector{}, bar);
+    }
+    render_result result{seconds_since(start), rays.load()};
+    std::filesystem::create_directories(job.output.parent_path());
+    canopy::write_image(job.output, to_display(fb, linear));
+    return result;
+}
+
+canopy::texture2d<canopy::vec4<float>> load_texture(std::filesystem::path const& path) {
+    auto const img = canopy::read_image(path);
+    std::vector<canopy::vec4<float>> texels(std::size_t(img.width) * std::size_t(img.height));
+    for (std::size_t i = 0; i < texels.size(); ++i)
+        texels[i] = {img.pixels[4 * i], img.pixels[4 * i + 1], img.pixels[4 * i + 2], img.pixels[4 * i + 3]};
+    return {img.width, img.height, std::move(texels), {canopy::filter_mode::bilinear, canopy::address_mode::clamp}};
+}
+
+// A bench scene (.obj or .inst) as a compiled scene with one grey material.
+canopy::compiled_scene compile_bench_scene(std::filesystem::path const& path) {
+    canopy::compiled_scene scene;
+    canopy::compiled_mesh mesh;
+    if (path.extension() == ".inst") {
+        auto inst = canopy::read_bench_inst(path);
+        mesh.triangles = std::move(inst.mesh.triangles);
+        scene.instanced = true;
+        scene.instance_transforms = inst.instances;
+        scene.instance_mesh.assign(inst.instances.size(), 0);
+    } else if (path.extension() == ".obj") {
+        mesh.triangles = canopy::read_bench_obj(path).triangles;
+    } else {
+        throw canopy::format_error(path.string() + ": unknown scene extension '" + path.extension().string() +
+                                   "' (expected .obj or .inst)");
+    }
+    if (mesh.triangles.empty()) throw canopy::format_error(path.string() + ": the scene has no triangles");
+    scene.materials = {canopy::material{{0.75f, 0.75f, 0.75f}, -1, true, 0.01f}};
+    scene.meshes.push_back(std::move(mesh));
+    scene.build();
+    return scene;
+}
+
+std::pair<int, int> parse_size(std::string const& text) {
+    auto const x = text.find('x');
+    int const w = x == std::string::npos ? 0 : std::atoi(text.substr(0, x).c_str());
+    int const h = x == std::string::npos ? 0 : std::atoi(text.substr(x + 1).c_str());
+    if (w < 1 || h < 1 || w > 16384 || h > 16384) throw usage_error("--size must be WxH, e.g. 800x600");
+    return {w, h};
+}
+
+int run_render(std::span<char*> args) {
+    std::optional<std::string> scene_path;
+    std::vector<char*> option_args;
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        std::string_view const a = args[i];
+        if (!a.starts_with("-") && (i == 0 || !std::string_view(args[i - 1]).starts_with("-"))) {
+            if (scene_path) throw usage_error("more than one scene given");
+            scene_path = std::string(a);
+        } else {
+            option_args.push_back(args[i]);
+        }
+    }
+    auto const options = parse_options(option_args, {"-o", "--size", "--spp", "--kernel", "--intersector", "--threads"},
+                                       render_usage);
+    render_job base;
+    auto const [w, h] = parse_size(options.contains("--size") ? options.at("--size") : "800x600");
+    base.width = w;
+    base.height = h;
+    if (options.contains("--kernel")) base.kernel = options.at("--kernel");
+    if (base.kernel != "primary" && base.kernel != "ao" && base.kernel != "path" && base.kernel != "heatmap")
+        throw usage_error("--kernel must be primary, ao, path or heatmap, not '" + base.kernel + "'");
+    if (options.contains("--intersector")) base.intersector = options.at("--intersector");
+    if (base.intersector != "none" && base.intersector != "alpha" && base.intersector != "procedural" &&
+        base.intersector != "costs")
+        throw usage_error("--intersector must be none, alpha, procedural or costs, not '" + base.intersector + "'");
+    base.spp = base.kernel == "ao" || base.kernel == "path" ? 16 : 1;
+    if (options.contains("--spp")) {
+        base.spp = std::atoi(options.at("--spp").c_str());
+        if (base.spp < 1 || base.spp > 65536) throw usage_error("--spp needs a positive number");
+    }
+    std::optional<tbb::global_control> threads;
+    if (options.contains("--threads")) {
+        int const n = std::atoi(options.at("--threads").c_str());
+        if (n < 1) throw usage_error("--threads needs a positive number");
+        threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(n));
+    }
+    std::filesystem::path const out = options.contains("-o") ? options.at("-o") : "out";
+    float const aspect = float(base.width) / float(base.height);
+
+    std::vector<std::pair<std::string, render_result>> results;
+    auto const build_start = clock_type::now();
+    if (!scene_path) {
+        auto forest = canopy::make_billboard_forest(load_texture(std::filesystem::path(CANOPY_ASSET_DIR) / "tree.png"));
+        double const build_seconds = seconds_since(build_start);
+        base.camera = canopy::pinhole_camera::look_at(forest.camera_eye, forest.camera_target, {0, 1, 0},
+                                                      forest.camera_fovy, aspect);
+        fmt::print(stderr, "demo scene: {} instances of {} meshes, built in {:.1f} ms\n",
+                   forest.scene.instances.size(), forest.scene.meshes.size(), build_seconds * 1e3);
+        struct figure {
+            char const* file;
+            char const* kernel;
+            char const* intersector;
+        };
+        figure const figures[] = {{"1_billboards_alpha_ignored.png", nullptr, "none"},
+                                  {"2_texture_alpha_mask.png", nullptr, "alpha"},
+                                  {"3_procedural_alpha_mask.png", nullptr, "procedural"},
+                                  {"4_bvh_cost_heatmap.png", "heatmap", "costs"}};
+        for (auto const& f : figures) {
+            render_job job = base;
+            if (f.kernel) job.kernel = f.kernel;
+            job.intersector = f.intersector;
+            job.output = out / f.file;
+            results.emplace_back(job.output.string(), render_image(forest.scene, job, false));
+        }
+    } else {
+        auto scene = compile_bench_scene(*scene_path);
+        canopy::aabb const box = scene.bounds();
+        auto const c = canopy::center(box);
+        float const extent = canopy::length(canopy::diagonal(box));
+        base.camera = canopy::pinhole_camera::look_at(c + canopy::vec3<float>(0.35f, 0.45f, 1.0f) * extent, c, {0, 1, 0},
+                                                      45.0f, aspect);
+        base.output = out / (std::filesystem::path(*scene_path).stem().string() + ".png");
+        results.emplace_back(base.output.string(), render_image(scene, base, true));
+    }
+    double total_seconds = 0.0;
+    std::uint64_t total_rays = 0;
+    for (auto const& [file, r] : results) {
+        fmt::print("{}: {:.1f} ms, {} rays, {:.2f} Mrays/s\n", file, r.seconds * 1e3, r.rays,
+                   double(r.rays) / r.seconds * 1e-6);
+        total_seconds += r.seconds;
+        total_rays += r.rays;
+    }
+    fmt::print("rendered {} image{} ({}x{}, {} spp) in {:.2f} s: {} rays, {:.2f} Mrays/s\n", results.size(),
+               results.size() == 1 ? "" : "s", base.width, base.height, base.spp, total_seconds, total_rays,
+               double(total_rays) / total_seconds * 1e-6);
+    return 0;
+}
+
 void print_stats(char const* name, canopy::bvh_stats const& s) {
     fmt::print("{}: {} primitives, {} nodes ({} leaves, largest {}), depth {}, SAH cost {:.2f}, {:.1f} bytes/primitive\n",
                name, s.primitive_count, s.node_count, s.leaf_count, s.max_leaf_size, s.depth, s.sah_cost,
@@ -204,12 +528,16 @@ int main(int argc, char** argv) {
             std::fputs(main_usage, stdout);
             return 0;
         }
+        if (command == "render") return run_render(args.subspan(2));
         if (command == "trace") return run_trace(args.subspan(2));
         if (command == "info") return run_info(args.subspan(2));
         throw usage_error("unknown command '" + std::string(command) + "'");
     } catch (usage_error const& e) {
         std::fprintf(stderr, "canopy %s: %s\n%s", std::string(command).c_str(), e.what(),
-                     command == "trace" ? trace_usage : command == "info" ? info_usage : main_usage);
+                     command == "trace"    ? trace_usage
+                     : command == "render" ? render_usage
+                     : command == "info"   ? info_usage
+                                           : main_usage);
         return 2;
     } catch (std::exception const& e) {
         std::fprintf(stderr, "canopy: %s\n", e.what());
