@@ -6,4 +6,5 @@ export import canopy.geometry;
 export import canopy.intersector;
 export import canopy.bvh;
 export import canopy.query;
+export import canopy.texture;
 export import canopy.render;

@@ -1,0 +1,430 @@
+// Tests of canopy.texture. References are hand-computed texels and blends, a double-precision
+// bilinear filter whose address modes are written as loops (repeated shifts and reflections),
+// and, for SIMD coordinates, the scalar tex2D run lane by lane.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <concepts>
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+import canopy.texture;
+
+namespace {
+
+using canopy::address_mode;
+using canopy::filter_mode;
+using canopy::tex2D;
+using canopy::texture2d;
+using canopy::vec2;
+using canopy::vec4;
+using rgba = vec4<float>;
+
+constexpr float inf = std::numeric_limits<float>::infinity();
+constexpr float quiet_nan = std::numeric_limits<float>::quiet_NaN();
+
+constexpr std::array all_filters{filter_mode::nearest, filter_mode::bilinear};
+constexpr std::array all_address_modes{address_mode::wrap, address_mode::clamp, address_mode::mirror};
+
+// 4 x 3 texels: texel (x, y) = {x / 4, y / 4, id / 16, 1 - id / 16} with id = x + 4y, so every
+// texel differs and every blend used below is exact in float.
+texture2d<rgba> grid_4x3(filter_mode filter, address_mode address) {
+    std::vector<rgba> texels;
+    for (int y = 0; y < 3; ++y)
+        for (int x = 0; x < 4; ++x) {
+            float const id = float(x + 4 * y) / 16;
+            texels.emplace_back(float(x) / 4, float(y) / 4, id, 1 - id);
+        }
+    return texture2d<rgba>(4, 3, std::move(texels), {.filter = filter, .address = address});
+}
+
+template <typename Texel> Texel random_texel(std::mt19937& rng) {
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    if constexpr (std::same_as<Texel, float>)
+        return unit(rng);
+    else
+        return {unit(rng), unit(rng), unit(rng), unit(rng)};
+}
+
+template <typename Texel> texture2d<Texel> random_texture(int width, int height, std::mt19937& rng) {
+    std::vector<Texel> texels(std::size_t(width) * std::size_t(height));
+    for (Texel& t : texels)
+        t = random_texel<Texel>(rng);
+    return texture2d<Texel>(width, height, std::move(texels));
+}
+
+// Equal bit patterns, or both NaN.
+bool same_bits(float a, float b) {
+    return std::bit_cast<std::uint32_t>(a) == std::bit_cast<std::uint32_t>(b) || (std::isnan(a) && std::isnan(b));
+}
+bool same_bits(rgba const& a, rgba const& b) {
+    return same_bits(a.x, b.x) && same_bits(a.y, b.y) && same_bits(a.z, b.z) && same_bits(a.w, b.w);
+}
+
+std::array<float, 4> channels(rgba const& t) { return {t.x, t.y, t.z, t.w}; }
+std::array<float, 1> channels(float t) { return {t}; }
+
+bool equal(rgba const& a, rgba const& b) { return a.x == b.x && a.y == b.y && a.z == b.z && a.w == b.w; }
+
+rgba sample(texture2d<rgba> const& texture, float u, float v) { return tex2D(texture, vec2<float>(u, v)); }
+
+// Index i brought into [0, n) by moving it a period at a time (wrap), stopping at the edge
+// (clamp), or reflecting it about the edge it crossed (mirror).
+int reference_address(long long i, int n, address_mode mode) {
+    switch (mode) {
+    case address_mode::wrap:
+        while (i < 0)
+            i += n;
+        while (i >= n)
+            i -= n;
+        return int(i);
+    case address_mode::clamp:
+        return int(std::clamp<long long>(i, 0, n - 1));
+    case address_mode::mirror:
+        while (i < 0 || i >= n)
+            i = i < 0 ? -1 - i : 2LL * n - 1 - i;
+        return int(i);
+    }
+    return -1;
+}
+
+// Texel indices of the bilinear footprint along one axis: floor(s * n - 0.5) and the next one,
+// with the scaled coordinate rounded to float as the filter does.
+std::pair<long long, long long> footprint(float s, int n) {
+    auto const first = static_cast<long long>(std::floor(s * float(n) - 0.5f));
+    return {first, first + 1};
+}
+
+// Bilinear filter in double: weights from the exact position s * n - 0.5, texels fetched
+// through reference_address.
+template <typename Texel> auto reference_bilinear(texture2d<Texel> const& texture, double u, double v) {
+    address_mode const mode = texture.address();
+    double const px = u * texture.width() - 0.5;
+    double const py = v * texture.height() - 0.5;
+    auto const x0 = static_cast<long long>(std::floor(px));
+    auto const y0 = static_cast<long long>(std::floor(py));
+    double const fx = px - double(x0);
+    double const fy = py - double(y0);
+    std::array<double, std::same_as<Texel, float> ? 1 : 4> result{};
+    for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) {
+            double const weight = (dx == 1 ? fx : 1 - fx) * (dy == 1 ? fy : 1 - fy);
+            auto const texel = channels(texture.texel(reference_address(x0 + dx, texture.width(), mode),
+                                                      reference_address(y0 + dy, texture.height(), mode)));
+            for (std::size_t c = 0; c < result.size(); ++c)
+                result[c] += weight * texel[c];
+        }
+    return result;
+}
+
+} // namespace
+
+TEST_CASE("texture2d stores texels row-major with row 0 at the top") {
+    texture2d<float> texture(3, 2, {1, 2, 3, 4, 5, 6});
+    CHECK(texture.width() == 3);
+    CHECK(texture.height() == 2);
+    CHECK(texture.texel(0, 0) == 1);
+    CHECK(texture.texel(2, 0) == 3);
+    CHECK(texture.texel(0, 1) == 4);
+    CHECK(texture.texel(2, 1) == 6);
+    CHECK(texture.texels().size() == 6);
+
+    SECTION("the modes default to bilinear and wrap and can be changed") {
+        CHECK(texture.filter() == filter_mode::bilinear);
+        CHECK(texture.address() == address_mode::wrap);
+        texture.set_filter(filter_mode::nearest);
+        texture.set_address(address_mode::mirror);
+        CHECK(texture.filter() == filter_mode::nearest);
+        CHECK(texture.address() == address_mode::mirror);
+    }
+
+    SECTION("texels can be edited in place") {
+        texture.texel(1, 1) = 9;
+        CHECK(texture.texels()[4] == 9);
+    }
+}
+
+TEST_CASE("texture2d construction rejects zero sizes and texel counts that do not match") {
+    using Catch::Matchers::Contains;
+    CHECK_THROWS_AS(texture2d<float>(0, 2, {}), std::invalid_argument);
+    CHECK_THROWS_WITH(texture2d<float>(0, 2, {}), Contains("width") && Contains("got 0"));
+    CHECK_THROWS_WITH(texture2d<float>(2, 0, {}), Contains("height") && Contains("got 0"));
+    CHECK_THROWS_WITH(texture2d<float>(-3, 2, {}), Contains("width") && Contains("got -3"));
+    CHECK_THROWS_WITH(texture2d<float>(texture2d<float>::max_side + 1, 1, {}), Contains("width"));
+    CHECK_THROWS_WITH(texture2d<rgba>(4, 3, std::vector<rgba>(11)),
+                      Contains("4 x 3 texels need 12 values, got 11"));
+    CHECK_THROWS_WITH(texture2d<float>(2, 2, {1, 2, 3, 4, 5}), Contains("need 4 values, got 5"));
+    CHECK_THROWS_WITH(texture2d<rgba>(1 << 15, 1 << 14, {}), Contains("exceed 2^31 - 1 floats"));
+    CHECK_NOTHROW(texture2d<float>(1, 1, {0.5f}));
+}
+
+TEST_CASE("nearest filtering returns the texel containing the coordinate") {
+    auto const texture = grid_4x3(filter_mode::nearest, address_mode::wrap);
+    for (int y = 0; y < 3; ++y)
+        for (int x = 0; x < 4; ++x) {
+            INFO("texel " << x << ", " << y);
+            // Centre, and just inside the top-left and bottom-right corners of the texel.
+            CHECK(equal(sample(texture, (float(x) + 0.5f) / 4, (float(y) + 0.5f) / 3), texture.texel(x, y)));
+            CHECK(equal(sample(texture, float(x) / 4, float(y) / 3 + 1e-6f), texture.texel(x, y)));
+            CHECK(equal(sample(texture, (float(x) + 0.99f) / 4, (float(y) + 0.99f) / 3), texture.texel(x, y)));
+        }
+    CHECK(equal(sample(texture, 0.0f, 0.0f), texture.texel(0, 0)));
+    CHECK(equal(sample(texture, 0.999f, 0.999f), texture.texel(3, 2)));
+    CHECK(equal(sample(texture, 0.999f, 0.0f), texture.texel(3, 0)));
+    CHECK(equal(sample(texture, 0.0f, 0.999f), texture.texel(0, 2)));
+}
+
+TEST_CASE("bilinear filtering at texel centres returns the texel exactly") {
+    for (address_mode const mode : all_address_modes) {
+        auto const texture = grid_4x3(filter_mode::bilinear, mode);
+        for (int y = 0; y < 3; ++y)
+            for (int x = 0; x < 4; ++x) {
+                INFO("texel " << x << ", " << y);
+                CHECK(equal(sample(texture, (float(x) + 0.5f) / 4, (float(y) + 0.5f) / 3), texture.texel(x, y)));
+            }
+    }
+    std::mt19937 rng(7);
+    auto const random = random_texture<rgba>(8, 5, rng);
+    for (int y = 0; y < 5; ++y)
+        for (int x = 0; x < 8; ++x)
+            CHECK(equal(sample(random, (float(x) + 0.5f) / 8, (float(y) + 0.5f) / 5), random.texel(x, y)));
+}
+
+TEST_CASE("bilinear filtering halfway between texel centres returns the exact average") {
+    auto const texture = grid_4x3(filter_mode::bilinear, address_mode::clamp);
+    // Between texels (1, 1) and (2, 1).
+    CHECK(equal(sample(texture, 0.5f, 0.5f), {0.375f, 0.25f, 11.0f / 32, 21.0f / 32}));
+    // Between texels (2, 0) and (2, 1).
+    CHECK(equal(sample(texture, 2.5f / 4, 1.0f / 3), {0.5f, 0.125f, 8.0f / 32, 24.0f / 32}));
+    // Amid texels (1, 0), (2, 0), (1, 1) and (2, 1).
+    CHECK(equal(sample(texture, 0.5f, 1.0f / 3), {0.375f, 0.125f, 7.0f / 32, 25.0f / 32}));
+    // A quarter of the way from texel (0, 2) to texel (1, 2).
+    CHECK(equal(sample(texture, 0.75f / 4, 2.5f / 3), {0.0625f, 0.5f, 33.0f / 64, 31.0f / 64}));
+}
+
+TEST_CASE("bilinear filtering at the image corners follows the address mode") {
+    rgba const wrapped{0.375f, 0.25f, 11.0f / 32, 21.0f / 32}; // mean of the four corner texels
+    for (auto const& [u, v] : {std::pair{0.0f, 0.0f}, std::pair{1.0f, 1.0f}, std::pair{1.0f, 0.0f}}) {
+        INFO("corner " << u << ", " << v);
+        CHECK(equal(sample(grid_4x3(filter_mode::bilinear, address_mode::wrap), u, v), wrapped));
+    }
+    auto const clamped = grid_4x3(filter_mode::bilinear, address_mode::clamp);
+    auto const mirrored = grid_4x3(filter_mode::bilinear, address_mode::mirror);
+    CHECK(equal(sample(clamped, 0.0f, 0.0f), clamped.texel(0, 0)));
+    CHECK(equal(sample(clamped, 1.0f, 1.0f), clamped.texel(3, 2)));
+    CHECK(equal(sample(clamped, 1.0f, 0.0f), clamped.texel(3, 0)));
+    CHECK(equal(sample(mirrored, 0.0f, 0.0f), mirrored.texel(0, 0)));
+    CHECK(equal(sample(mirrored, 1.0f, 1.0f), mirrored.texel(3, 2)));
+    CHECK(equal(sample(mirrored, 0.0f, 1.0f), mirrored.texel(0, 2)));
+}
+
+TEST_CASE("nearest filtering outside [0, 1] wraps, clamps or mirrors the texel index") {
+    // Scaled by 4 x 3: u -> 11, -1, 5, -4, -2.4 and v -> 8.25, -0.75, 4.5, -3, -1.8.
+    struct expected_texels {
+        float u, v;
+        int wrap_x, wrap_y, clamp_x, clamp_y, mirror_x, mirror_y;
+    };
+    std::array const cases{
+        expected_texels{2.75f, 2.75f, 3, 2, 3, 2, 3, 2},  expected_texels{-0.25f, -0.25f, 3, 2, 0, 0, 0, 0},
+        expected_texels{1.25f, 1.5f, 1, 1, 3, 2, 2, 1},   expected_texels{-1.0f, -1.0f, 0, 0, 0, 0, 3, 2},
+        expected_texels{-0.6f, -0.6f, 1, 1, 0, 0, 2, 1},
+    };
+    auto const wrapped = grid_4x3(filter_mode::nearest, address_mode::wrap);
+    auto const clamped = grid_4x3(filter_mode::nearest, address_mode::clamp);
+    auto const mirrored = grid_4x3(filter_mode::nearest, address_mode::mirror);
+    for (auto const& c : cases) {
+        INFO("coordinate " << c.u << ", " << c.v);
+        CHECK(equal(sample(wrapped, c.u, c.v), wrapped.texel(c.wrap_x, c.wrap_y)));
+        CHECK(equal(sample(clamped, c.u, c.v), clamped.texel(c.clamp_x, c.clamp_y)));
+        CHECK(equal(sample(mirrored, c.u, c.v), mirrored.texel(c.mirror_x, c.mirror_y)));
+    }
+}
+
+TEST_CASE("bilinear filtering outside [0, 1] blends the wrapped, clamped or mirrored texels") {
+    auto const wrapped = grid_4x3(filter_mode::bilinear, address_mode::wrap);
+    auto const clamped = grid_4x3(filter_mode::bilinear, address_mode::clamp);
+    auto const mirrored = grid_4x3(filter_mode::bilinear, address_mode::mirror);
+
+    SECTION("u = -0.25 on the centre row: halfway between columns -2 and -1") {
+        CHECK(equal(sample(wrapped, -0.25f, 0.5f), {0.625f, 0.25f, 13.0f / 32, 19.0f / 32}));  // columns 2, 3
+        CHECK(equal(sample(clamped, -0.25f, 0.5f), clamped.texel(0, 1)));                     // columns 0, 0
+        CHECK(equal(sample(mirrored, -0.25f, 0.5f), {0.125f, 0.25f, 9.0f / 32, 23.0f / 32})); // columns 1, 0
+    }
+    SECTION("u = 2.75 on the centre row: halfway between columns 10 and 11") {
+        CHECK(equal(sample(wrapped, 2.75f, 0.5f), {0.625f, 0.25f, 13.0f / 32, 19.0f / 32}));  // columns 2, 3
+        CHECK(equal(sample(clamped, 2.75f, 0.5f), clamped.texel(3, 1)));                      // columns 3, 3
+        CHECK(equal(sample(mirrored, 2.75f, 0.5f), {0.625f, 0.25f, 13.0f / 32, 19.0f / 32})); // columns 2, 3
+    }
+    SECTION("v = -0.25 in column 1: rows -2 and -1 weighted 1/4 and 3/4") {
+        CHECK(equal(sample(wrapped, 0.375f, -0.25f), {0.25f, 0.4375f, 0.5f, 0.5f}));      // rows 1, 2
+        CHECK(equal(sample(clamped, 0.375f, -0.25f), clamped.texel(1, 0)));              // rows 0, 0
+        CHECK(equal(sample(mirrored, 0.375f, -0.25f), {0.25f, 0.0625f, 0.125f, 0.875f})); // rows 1, 0
+    }
+}
+
+TEST_CASE("bilinear filtering matches a double-precision reference at random coordinates") {
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> coordinate(-3.0f, 3.0f);
+    auto const check_texture = [&](auto texture) {
+        for (address_mode const mode : all_address_modes) {
+            texture.set_address(mode);
+            for (int k = 0; k < 2000; ++k) {
+                float const u = coordinate(rng), v = coordinate(rng);
+                auto const expected = reference_bilinear(texture, u, v);
+                auto const actual = channels(tex2D(texture, vec2<float>(u, v)));
+                INFO("mode " << int(mode) << " at " << u << ", " << v);
+                for (std::size_t c = 0; c < actual.size(); ++c)
+                    CHECK(actual[c] == Approx(expected[c]).margin(1e-5));
+            }
+        }
+    };
+    check_texture(random_texture<rgba>(4, 3, rng));
+    check_texture(random_texture<rgba>(1, 5, rng));
+    check_texture(random_texture<float>(5, 2, rng));
+}
+
+TEST_CASE("bilinear results stay within the range of the four neighbouring texels") {
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> coordinate(-2.0f, 2.0f);
+    auto texture = random_texture<rgba>(5, 4, rng);
+    for (address_mode const mode : all_address_modes) {
+        texture.set_address(mode);
+        for (int k = 0; k < 5000; ++k) {
+            float const u = coordinate(rng), v = coordinate(rng);
+            auto const [x0, x1] = footprint(u, 5);
+            auto const [y0, y1] = footprint(v, 4);
+            std::array const neighbours{
+                channels(texture.texel(reference_address(x0, 5, mode), reference_address(y0, 4, mode))),
+                channels(texture.texel(reference_address(x1, 5, mode), reference_address(y0, 4, mode))),
+                channels(texture.texel(reference_address(x0, 5, mode), reference_address(y1, 4, mode))),
+                channels(texture.texel(reference_address(x1, 5, mode), reference_address(y1, 4, mode)))};
+            auto const result = channels(sample(texture, u, v));
+            for (std::size_t c = 0; c < 4; ++c) {
+                float lowest = inf, highest = -inf;
+                for (auto const& n : neighbours) {
+                    lowest = std::min(lowest, n[c]);
+                    highest = std::max(highest, n[c]);
+                }
+                INFO("mode " << int(mode) << " at " << u << ", " << v << ", channel " << c);
+                CHECK(result[c] >= lowest);
+                CHECK(result[c] <= highest);
+            }
+        }
+    }
+}
+
+TEST_CASE("NaN, infinite and huge coordinates sample the documented texels") {
+    SECTION("a NaN component samples as 0") {
+        for (filter_mode const filter : all_filters)
+            for (address_mode const mode : all_address_modes) {
+                auto const texture = grid_4x3(filter, mode);
+                CHECK(same_bits(sample(texture, quiet_nan, quiet_nan), sample(texture, 0.0f, 0.0f)));
+                CHECK(same_bits(sample(texture, quiet_nan, 0.7f), sample(texture, 0.0f, 0.7f)));
+                CHECK(same_bits(sample(texture, 0.3f, -quiet_nan), sample(texture, 0.3f, 0.0f)));
+            }
+        CHECK(equal(sample(grid_4x3(filter_mode::nearest, address_mode::wrap), quiet_nan, quiet_nan), {0, 0, 0, 1}));
+    }
+    SECTION("infinities sample at ±2^30 texels") {
+        // 2^30 mod 4 = 0, 2^30 mod 3 = 1, -2^30 mod 3 = 2; mirrored: 2^30 mod 6 = 4 -> row 1.
+        auto const wrapped = grid_4x3(filter_mode::nearest, address_mode::wrap);
+        auto const clamped = grid_4x3(filter_mode::nearest, address_mode::clamp);
+        auto const mirrored = grid_4x3(filter_mode::nearest, address_mode::mirror);
+        CHECK(equal(sample(wrapped, inf, inf), wrapped.texel(0, 1)));
+        CHECK(equal(sample(wrapped, -inf, -inf), wrapped.texel(0, 2)));
+        CHECK(equal(sample(clamped, inf, inf), clamped.texel(3, 2)));
+        CHECK(equal(sample(clamped, -inf, -inf), clamped.texel(0, 0)));
+        CHECK(equal(sample(mirrored, inf, inf), mirrored.texel(0, 1)));
+        CHECK(same_bits(sample(wrapped, 1e30f, -1e30f), sample(wrapped, inf, -inf)));
+        CHECK(equal(sample(grid_4x3(filter_mode::bilinear, address_mode::clamp), inf, -inf), clamped.texel(3, 0)));
+    }
+    SECTION("a 1 x 1 texture returns its texel everywhere") {
+        for (filter_mode const filter : all_filters)
+            for (address_mode const mode : all_address_modes) {
+                texture2d<rgba> const single(1, 1, {rgba(0.1f, 0.2f, 0.3f, 0.4f)}, {.filter = filter, .address = mode});
+                for (float const s : {0.0f, -0.0f, 0.5f, 1.0f, -7.3f, 1e30f, inf, -inf, quiet_nan})
+                    CHECK(same_bits(sample(single, s, 0.25f - s), single.texel(0, 0)));
+            }
+    }
+}
+
+TEST_CASE("float textures sample like the matching channel of an RGBA texture") {
+    std::mt19937 rng(5);
+    auto rgba_texture = random_texture<rgba>(6, 5, rng);
+    std::vector<float> blue;
+    for (rgba const& t : rgba_texture.texels())
+        blue.push_back(t.z);
+    texture2d<float> blue_texture(6, 5, std::move(blue));
+    std::uniform_real_distribution<float> coordinate(-2.0f, 2.0f);
+    for (filter_mode const filter : all_filters)
+        for (address_mode const mode : all_address_modes) {
+            rgba_texture.set_filter(filter);
+            rgba_texture.set_address(mode);
+            blue_texture.set_filter(filter);
+            blue_texture.set_address(mode);
+            for (int k = 0; k < 1000; ++k) {
+                vec2<float> const coord(coordinate(rng), coordinate(rng));
+                CHECK(same_bits(tex2D(blue_texture, coord), tex2D(rgba_texture, coord).z));
+            }
+        }
+}
+
+TEMPLATE_TEST_CASE("tex2D on SIMD coordinates equals scalar tex2D lane by lane, bit for bit", "",
+                   canopy::simd::float4, canopy::simd::float8, canopy::simd::float16) {
+    constexpr int width = canopy::simd::simd_width_v<TestType>;
+    float const max = std::numeric_limits<float>::max();
+    float const denormal = std::numeric_limits<float>::denorm_min();
+    std::array const special{0.0f,   -0.0f,   inf,   -inf,   quiet_nan,     -quiet_nan,     1.0f,       -1.0f,
+                             0.5f,   0.75f,   2.75f, -0.25f, 1e30f,   -1e30f,   max,        -max,
+                             denormal, -denormal, 0x1p24f, 0x1p30f, 0x1p31f, -0x1p31f, 0.99999994f, 1.0000001f};
+    std::vector<vec2<float>> coords;
+    for (float const u : special)
+        for (float const v : special)
+            coords.emplace_back(u, v);
+    std::mt19937 rng(13);
+    std::uniform_real_distribution<float> near_image(-3.0f, 3.0f);
+    std::uniform_int_distribution<std::uint32_t> bits;
+    for (int k = 0; k < 2000; ++k) {
+        coords.emplace_back(near_image(rng), near_image(rng));
+        coords.emplace_back(std::bit_cast<float>(bits(rng)), std::bit_cast<float>(bits(rng)));
+    }
+    while (coords.size() % width != 0)
+        coords.emplace_back(0.25f, 0.25f);
+
+    auto const check_texture = [&](auto texture) {
+        for (filter_mode const filter : all_filters)
+            for (address_mode const mode : all_address_modes) {
+                texture.set_filter(filter);
+                texture.set_address(mode);
+                for (std::size_t first = 0; first < coords.size(); first += width) {
+                    vec2<TestType> packet;
+                    for (int i = 0; i < width; ++i)
+                        canopy::set_lane(packet, i, coords[first + std::size_t(i)]);
+                    auto const result = tex2D(texture, packet);
+                    for (int i = 0; i < width; ++i) {
+                        vec2<float> const coord = coords[first + std::size_t(i)];
+                        auto const expected = tex2D(texture, coord);
+                        auto const lane = [&] {
+                            if constexpr (std::same_as<decltype(result), TestType const>)
+                                return result[i];
+                            else
+                                return canopy::get_lane(result, i);
+                        }();
+                        INFO("filter " << int(filter) << ", mode " << int(mode) << " at " << coord.x << ", "
+                                       << coord.y);
+                        CHECK(same_bits(lane, expected));
+                    }
+                }
+            }
+    };
+    check_texture(random_texture<rgba>(4, 3, rng));
+    check_texture(random_texture<rgba>(7, 1, rng));
+    check_texture(random_texture<float>(5, 6, rng));
+    check_texture(random_texture<float>(1, 1, rng));
+}
