@@ -28,22 +28,23 @@ export import canopy.geometry;
 
 export namespace canopy {
 
-// A box type that only hooks written by the user accept (as `aabb const&` or generically): the
-// base class's forwarding operator() excludes it. Used in unevaluated checks only, to tell a
-// user's box hook from the inherited default (which lets traversal use its wide SIMD box test).
-template <typename S>
-struct box_hook_probe : basic_aabb<S> {};
+// Types that only hooks written by the user accept (as `aabb const&` / `triangle const&` or
+// generically): the base class's forwarding operator() excludes them. Used in unevaluated checks
+// only, to tell a user's hook from the inherited default, so that traversal can use its own fast
+// paths (wide SIMD box tests, prepared rays) when no hook is there.
+template <typename Base>
+struct hook_probe : Base {};
 
 template <typename P>
-inline constexpr bool is_box_hook_probe_v = false;
-template <typename S>
-inline constexpr bool is_box_hook_probe_v<box_hook_probe<S>> = true;
+inline constexpr bool is_hook_probe_v = false;
+template <typename Base>
+inline constexpr bool is_hook_probe_v<hook_probe<Base>> = true;
 
 // CRTP base: forwards every test to the library's intersect(), found by ADL.
 template <typename Derived>
 struct basic_intersector {
     template <typename Ray, typename Prim, typename... Args>
-        requires(!is_box_hook_probe_v<Prim>) && requires(Ray const& ray, Prim const& prim, Args&&... args) {
+        requires(!is_hook_probe_v<Prim>) && requires(Ray const& ray, Prim const& prim, Args&&... args) {
             intersect(ray, prim, std::forward<Args>(args)...);
         }
     auto operator()(Ray const& ray, Prim const& prim, Args&&... args) {
@@ -67,26 +68,33 @@ struct moller_trumbore_intersector : basic_intersector<moller_trumbore_intersect
 template <typename P>
 concept acceleration_structure = requires { typename P::acceleration_structure_tag; };
 
-// I intercepts the ray/primitive test of Prim (its own overload, a base forwarding one, or a
-// lambda).
+// The plain ray hooks receive: a basic_ray<T> even when traversal works with a derived type
+// (prepared_ray), so that a hook declared for `canopy::ray const&` is an exact match and is never
+// outranked by the inherited forwarding template.
+template <typename Ray>
+[[gnu::always_inline]] inline auto const& plain_ray(Ray const& ray) {
+    return static_cast<basic_ray<ray_value_t<Ray>> const&>(ray);
+}
+
+// I has a ray/primitive hook of its own for Prim (a member, a lambda, an overload set); the
+// forwarding operator inherited from basic_intersector does not count.
 template <typename I, typename Ray, typename Prim>
-concept primitive_hook_for = requires(I& isect, Ray const& ray, Prim const& prim) {
+concept primitive_hook_for = requires(I& isect, basic_ray<ray_value_t<Ray>> const& ray, hook_probe<Prim> const& prim) {
     { isect(ray, prim) };
 };
 
-// I has a ray/box hook of its own (called with the precomputed inverse direction), as opposed to
-// the forwarding one inherited from basic_intersector, which does not count.
+// I has a ray/box hook of its own (called with the precomputed inverse direction).
 template <typename I, typename Ray, typename Box, typename InvDir>
-concept box_hook_for =
-    requires(I& isect, Ray const& ray, box_hook_probe<typename Box::value_type> const& box, InvDir const& inv_dir) {
-        { isect(ray, box, inv_dir) };
-    };
+concept box_hook_for = requires(I& isect, basic_ray<ray_value_t<Ray>> const& ray, hook_probe<Box> const& box,
+                                InvDir const& inv_dir) {
+    { isect(ray, box, inv_dir) };
+};
 
 // The ray/box test of the traversal: the intersector's hook if it has one, else the default.
 template <typename I, typename Ray, typename Box, typename InvDir>
 [[gnu::always_inline]] inline auto test_box(I& isect, Ray const& ray, Box const& box, InvDir const& inv_dir) {
     if constexpr (box_hook_for<I, Ray, Box, InvDir>)
-        return isect(ray, box, inv_dir);
+        return isect(plain_ray(ray), box, inv_dir);
     else
         return intersect(ray, box, inv_dir);
 }
@@ -95,7 +103,7 @@ template <typename I, typename Ray, typename Box, typename InvDir>
 template <typename I, typename Ray, typename Prim>
 [[gnu::always_inline]] inline auto test_primitive(I& isect, Ray const& ray, Prim const& prim) {
     if constexpr (primitive_hook_for<I, Ray, Prim>)
-        return isect(ray, prim);
+        return isect(plain_ray(ray), prim);
     else
         return intersect(ray, prim);
 }

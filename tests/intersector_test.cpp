@@ -446,5 +446,9 @@ TEST_CASE("the intersector concepts detect the hooks an intersector provides") {
     STATIC_REQUIRE(canopy::primitive_hook_for<alpha_mask_without_using, ray, triangle>);
     STATIC_REQUIRE_FALSE(canopy::box_hook_for<alpha_mask_without_using, ray, aabb, inv_dir>);
     STATIC_REQUIRE(canopy::box_hook_for<box_counter_without_using, ray, aabb, inv_dir>);
-    STATIC_REQUIRE(canopy::primitive_hook_for<canopy::default_intersector, ray, canopy::sphere>);
+    // The forwarding operator inherited from basic_intersector is not a hook of its own.
+    STATIC_REQUIRE_FALSE(canopy::primitive_hook_for<canopy::default_intersector, ray, canopy::sphere>);
+    STATIC_REQUIRE_FALSE(canopy::box_hook_for<canopy::default_intersector, ray, aabb, inv_dir>);
+    STATIC_REQUIRE(canopy::primitive_hook_for<canopy::moller_trumbore_intersector, ray, triangle>);
+    STATIC_REQUIRE_FALSE(canopy::primitive_hook_for<canopy::moller_trumbore_intersector, ray, canopy::sphere>);
 }
