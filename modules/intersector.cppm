@@ -40,11 +40,14 @@ inline constexpr bool is_hook_probe_v = false;
 template <typename Base>
 inline constexpr bool is_hook_probe_v<hook_probe<Base>> = true;
 
-// CRTP base: forwards every test to the library's intersect(), found by ADL.
+// CRTP base: forwards every test to the library's intersect(), found by ADL. It does not take
+// the prepared rays of traversal (which derive from basic_ray): a user's hook declared for
+// `canopy::ray const&` then takes them by derived-to-base conversion, unopposed, and template
+// hooks receive them as they are, with their cached per-ray constants.
 template <typename Derived>
 struct basic_intersector {
     template <typename Ray, typename Prim, typename... Args>
-        requires(!is_hook_probe_v<Prim>) && requires(Ray const& ray, Prim const& prim, Args&&... args) {
+        requires(!is_hook_probe_v<Prim>) && (!is_prepared_ray_v<Ray>) && requires(Ray const& ray, Prim const& prim, Args&&... args) {
             intersect(ray, prim, std::forward<Args>(args)...);
         }
     auto operator()(Ray const& ray, Prim const& prim, Args&&... args) {
@@ -68,25 +71,16 @@ struct moller_trumbore_intersector : basic_intersector<moller_trumbore_intersect
 template <typename P>
 concept acceleration_structure = requires { typename P::acceleration_structure_tag; };
 
-// The plain ray hooks receive: a basic_ray<T> even when traversal works with a derived type
-// (prepared_ray), so that a hook declared for `canopy::ray const&` is an exact match and is never
-// outranked by the inherited forwarding template.
-template <typename Ray>
-[[gnu::always_inline]] inline auto const& plain_ray(Ray const& ray) {
-    return static_cast<basic_ray<ray_value_t<Ray>> const&>(ray);
-}
-
 // I has a ray/primitive hook of its own for Prim (a member, a lambda, an overload set); the
 // forwarding operator inherited from basic_intersector does not count.
 template <typename I, typename Ray, typename Prim>
-concept primitive_hook_for = requires(I& isect, basic_ray<ray_value_t<Ray>> const& ray, hook_probe<Prim> const& prim) {
+concept primitive_hook_for = requires(I& isect, Ray const& ray, hook_probe<Prim> const& prim) {
     { isect(ray, prim) };
 };
 
 // I has a ray/box hook of its own (called with the precomputed inverse direction).
 template <typename I, typename Ray, typename Box, typename InvDir>
-concept box_hook_for = requires(I& isect, basic_ray<ray_value_t<Ray>> const& ray, hook_probe<Box> const& box,
-                                InvDir const& inv_dir) {
+concept box_hook_for = requires(I& isect, Ray const& ray, hook_probe<Box> const& box, InvDir const& inv_dir) {
     { isect(ray, box, inv_dir) };
 };
 
@@ -94,7 +88,7 @@ concept box_hook_for = requires(I& isect, basic_ray<ray_value_t<Ray>> const& ray
 template <typename I, typename Ray, typename Box, typename InvDir>
 [[gnu::always_inline]] inline auto test_box(I& isect, Ray const& ray, Box const& box, InvDir const& inv_dir) {
     if constexpr (box_hook_for<I, Ray, Box, InvDir>)
-        return isect(plain_ray(ray), box, inv_dir);
+        return isect(ray, box, inv_dir);
     else
         return intersect(ray, box, inv_dir);
 }
@@ -103,7 +97,7 @@ template <typename I, typename Ray, typename Box, typename InvDir>
 template <typename I, typename Ray, typename Prim>
 [[gnu::always_inline]] inline auto test_primitive(I& isect, Ray const& ray, Prim const& prim) {
     if constexpr (primitive_hook_for<I, Ray, Prim>)
-        return isect(plain_ray(ray), prim);
+        return isect(ray, prim);
     else
         return intersect(ray, prim);
 }

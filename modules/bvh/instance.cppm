@@ -52,16 +52,20 @@ basic_aabb<typename BVH::value_type> get_bounds(instance<BVH> const& inst) {
 template <typename Ray, typename BVH, typename I, typename Query>
 bool traverse(Ray& ray, instance<BVH> const& inst, I& isect, Query& query) {
     if (inst.bvh == nullptr) return false;
-    // A plain ray: constants cached for the outer frame do not hold in object space.
-    basic_ray<ray_value_t<Ray>> local = ray;
-    if (!inst.identity) {
+    query.enter_instance(inst.inst_id);
+    bool stop;
+    if (inst.identity) {
+        // Same ray, same per-ray constants: bit-identical to tracing the BVH itself.
+        stop = traverse(ray, *inst.bvh, isect, query);
+    } else {
+        // A plain ray: constants cached for the outer frame do not hold in object space.
+        basic_ray<ray_value_t<Ray>> local = ray;
         local.origin = inst.world_to_object.transform_point(ray.origin);
         local.direction = inst.world_to_object.transform_vector(ray.direction);
+        stop = traverse(local, *inst.bvh, isect, query);
+        ray.tmax = local.tmax;
     }
-    query.enter_instance(inst.inst_id);
-    bool const stop = traverse(local, *inst.bvh, isect, query);
     query.leave_instance();
-    ray.tmax = local.tmax;
     return stop;
 }
 

@@ -122,6 +122,11 @@ struct prepared_ray : basic_ray<T> {
     vec3<T> inv_dir;
 };
 
+template <typename Ray>
+inline constexpr bool is_prepared_ray_v = false;
+template <typename T>
+inline constexpr bool is_prepared_ray_v<prepared_ray<T>> = true;
+
 // Woop et al.'s test for a ray whose shear is already known.
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Instruction counts (callgrind, deterministic) of the same query with and without intersectors
+# and instancing, counted inside trace_all only. Prints a Markdown table; with --check, fails
+# when the explicit default_intersector, or a forwarding triangle hook, costs more than 1 % over
+# the default query. (A box hook of the user's own is called once per box by contract, so it
+# replaces the 8-wide SIMD box test: its cost is reported, not bounded.)
+#   bench/zero_cost.sh [--check] [RAYS] [BINARY]
+set -euo pipefail
+check=0
+if [ "${1:-}" = "--check" ]; then check=1; shift; fi
+rays=${1:-20000}
+bin=${2:-build/release/bench/canopy_bench_zero_cost}
+command -v valgrind >/dev/null || { echo "zero_cost: valgrind is needed (apt-get install valgrind)" >&2; exit 1; }
+count() {
+  local out
+  out=$(mktemp)
+  valgrind --tool=callgrind --callgrind-out-file="$out" --collect-atstart=no --toggle-collect='*trace_all*' \
+    "$bin" "$1" "$rays" >/dev/null 2>&1
+  awk '/^summary:/ {print $2}' "$out"
+  rm -f "$out"
+}
+declare -A n
+for mode in default explicit forwarding forwarding_tri single instanced instanced_rt; do n[$mode]=$(count "$mode"); done
+ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%+.3f %%", (a / b - 1) * 100 }'; }
+echo "| workload ($rays rays, icosphere 5120 triangles) | instructions | vs. baseline |"
+echo "|---|---|---|"
+echo "| closest_hit(r, f, l) | ${n[default]} | baseline |"
+echo "| closest_hit(r, f, l, default_intersector{}) | ${n[explicit]} | $(ratio "${n[explicit]}" "${n[default]}") |"
+echo "| paper-style forwarding triangle hook | ${n[forwarding_tri]} | $(ratio "${n[forwarding_tri]}" "${n[default]}") |"
+echo "| paper-style forwarding triangle + box hooks (box hook called per box) | ${n[forwarding]} | $(ratio "${n[forwarding]}" "${n[default]}") |"
+echo "| one level (mesh BVH) | ${n[single]} | baseline |"
+echo "| identity instance in a top-level BVH | ${n[instanced]} | $(ratio "${n[instanced]}" "${n[single]}") |"
+echo "| rotated instance in a top-level BVH | ${n[instanced_rt]} | $(ratio "${n[instanced_rt]}" "${n[single]}") |"
+if [ "$check" = 1 ]; then
+  awk -v d="${n[default]}" -v e="${n[explicit]}" -v f="${n[forwarding_tri]}" 'BEGIN {
+    if (e > d * 1.01 || f > d * 1.01) { print "zero_cost: an intersector that adds nothing costs more than 1 %" > "/dev/stderr"; exit 1 }
+  }'
+  echo "zero_cost: default_intersector and a forwarding triangle hook are within 1 % of the default query"
+fi
