@@ -1,0 +1,430 @@
+// Tests of canopy.render and the alpha masks of canopy.scene, on rendered images. References are
+// independent of the renderer: analytic ray/plane intersections in double precision with the
+// shading formula written out, the procedural mask's rule written out, a second counting pass
+// with a separately written counter, and the same image rendered under other thread counts.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+#include <tbb/global_control.h>
+
+import canopy.billboard_forest;
+
+namespace {
+
+using canopy::vec2;
+using canopy::vec3;
+using canopy::vec4;
+
+constexpr int width = 64;
+constexpr int height = 48;
+
+// ---- a hand-built scene: a masked quad in front of a coloured backdrop -------------------
+
+constexpr float front_half = 1.0f;  // front quad: [-1, 1]² in the plane z = 0
+constexpr float front_z = 0.0f;
+constexpr float back_half = 6.0f;   // backdrop: [-6, 6]² in the plane z = -1
+constexpr float back_z = -1.0f;
+constexpr int back_mesh = 0;
+constexpr int front_mesh = 1;
+
+vec3<float> const back_albedo{0.3f, 0.4f, 0.9f};
+vec4<float> const transparent_texel{1.0f, 0.0f, 1.0f, 0.0f}; // left half of the texture
+vec4<float> const opaque_texel{0.2f, 0.8f, 0.3f, 1.0f};      // right half
+
+// A square facing +z with texture coordinates (0, 0) at the top-left corner (-half, half) and
+// (1, 1) at the bottom-right one, as the billboards of the demo scene.
+canopy::compiled_mesh make_quad(float half, float z, int material) {
+    vec3<float> const a(-half, half, z), b(half, half, z), c(half, -half, z), d(-half, -half, z);
+    canopy::compiled_mesh quad;
+    quad.triangles = {canopy::triangle{a, b, c, 0, 0}, canopy::triangle{a, c, d, 1, 0}};
+    quad.uvs = {{vec2<float>(0, 0), vec2<float>(1, 0), vec2<float>(1, 1)},
+                {vec2<float>(0, 0), vec2<float>(1, 1), vec2<float>(0, 1)}};
+    quad.material = material;
+    return quad;
+}
+
+enum class front_kind { none, textured, procedural };
+
+// Mesh 0 the backdrop, mesh 1 (unless `none`) the masked front quad: either textured with a
+// 2 × 1 texture whose left texel is transparent, or untextured for the procedural mask. Both
+// meshes are placed by identity instances, so hits report geom_id = mesh.
+canopy::compiled_scene make_layered_scene(front_kind front) {
+    canopy::compiled_scene s;
+    s.materials = {canopy::material{back_albedo},
+                   canopy::material{{1.0f, 1.0f, 1.0f}, front == front_kind::textured ? 0 : -1, true, 0.01f}};
+    s.textures.emplace_back(2, 1, std::vector<vec4<float>>{transparent_texel, opaque_texel},
+                            canopy::sampler{canopy::filter_mode::nearest, canopy::address_mode::clamp});
+    s.meshes.push_back(make_quad(back_half, back_z, 0));
+    if (front != front_kind::none) s.meshes.push_back(make_quad(front_half, front_z, 1));
+    s.instanced = true;
+    for (std::size_t k = 0; k < s.meshes.size(); ++k) {
+        s.instance_mesh.push_back(std::uint32_t(k));
+        s.instance_transforms.push_back(canopy::affine_transform<float>::identity());
+    }
+    s.build();
+    return s;
+}
+
+canopy::pinhole_camera layered_camera(int w, int h) {
+    return canopy::pinhole_camera::look_at({0.0f, 0.0f, 4.0f}, {0.0f, 0.0f, 0.0f}, {0.0f, 1.0f, 0.0f}, 60.0f,
+                                           float(w) / float(h));
+}
+
+canopy::ray pixel_ray(canopy::pinhole_camera const& camera, int x, int y, int w, int h) {
+    return camera.primary_ray(float(x) + 0.5f, float(y) + 0.5f, w, h);
+}
+
+// Where a ray meets the plane z = plane_z, in double precision.
+struct plane_point {
+    double x, y;
+};
+plane_point meet_plane(canopy::ray const& r, double plane_z) {
+    double const t = (plane_z - double(r.origin.z)) / double(r.direction.z);
+    return {double(r.origin.x) + t * double(r.direction.x), double(r.origin.y) + t * double(r.direction.y)};
+}
+
+// Texture coordinates of a point of the front quad's plane (outside [0, 1]² when off the quad).
+vec2<double> front_uv(plane_point p) {
+    return {(p.x + double(front_half)) / (2.0 * double(front_half)),
+            (double(front_half) - p.y) / (2.0 * double(front_half))};
+}
+
+// How far uv is from the quad's edges (negative outside).
+double inside_distance(vec2<double> uv) {
+    return std::min(std::min(uv.x, 1.0 - uv.x), std::min(uv.y, 1.0 - uv.y));
+}
+
+bool close(vec4<float> a, vec3<float> b, float tolerance = 1e-5f) {
+    return std::fabs(a.x - b.x) <= tolerance && std::fabs(a.y - b.y) <= tolerance && std::fabs(a.z - b.z) <= tolerance;
+}
+
+bool same(vec4<float> a, vec4<float> b) { return a.x == b.x && a.y == b.y && a.z == b.z && a.w == b.w; }
+
+std::string to_string(vec4<float> c) {
+    return "(" + std::to_string(c.x) + ", " + std::to_string(c.y) + ", " + std::to_string(c.z) + ")";
+}
+
+template <typename I>
+canopy::framebuffer render_primary(canopy::compiled_scene const& s, I const& isect, canopy::light_options const& light) {
+    canopy::framebuffer fb(width, height);
+    auto const camera = layered_camera(width, height);
+    canopy::render_tiles(fb, [&](int x, int y) {
+        return canopy::primary_kernel(s, pixel_ray(camera, x, y, width, height), isect, light);
+    });
+    return fb;
+}
+
+// ---- the demo forest, small -------------------------------------------------------------
+
+// An RGBA "tree": opaque inside a triangle pointing up, transparent around it.
+canopy::texture2d<vec4<float>> tree_texture() {
+    int const n = 32;
+    std::vector<vec4<float>> texels;
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            float const u = (float(i) + 0.5f) / float(n), v = (float(j) + 0.5f) / float(n);
+            bool const leaf = std::fabs(u - 0.5f) < 0.45f * v && v < 0.85f;
+            bool const trunk = std::fabs(u - 0.5f) < 0.06f && v >= 0.85f;
+            texels.push_back(leaf ? vec4<float>(0.1f, 0.6f, 0.2f, 1.0f)
+                                  : trunk ? vec4<float>(0.4f, 0.25f, 0.1f, 1.0f) : vec4<float>(0.0f, 0.0f, 0.0f, 0.0f));
+        }
+    return {n, n, std::move(texels), {canopy::filter_mode::bilinear, canopy::address_mode::clamp}};
+}
+
+canopy::billboard_forest small_forest() {
+    return canopy::make_billboard_forest(tree_texture(), {.billboards = 60, .spheres = 5, .seed = 7});
+}
+
+canopy::pinhole_camera forest_camera(canopy::billboard_forest const& forest) {
+    return canopy::pinhole_camera::look_at(forest.camera_eye, forest.camera_target, {0.0f, 1.0f, 0.0f},
+                                           forest.camera_fovy, float(width) / float(height));
+}
+
+} // namespace
+
+TEST_CASE("pixels over masked-out texels show what lies behind the billboard") {
+    auto const scene = make_layered_scene(front_kind::textured);
+    auto const backdrop_only = make_layered_scene(front_kind::none);
+    canopy::texture_alpha_mask mask;
+    mask.scene = &scene;
+    canopy::texture_alpha_mask backdrop_mask;
+    backdrop_mask.scene = &backdrop_only;
+
+    // A slanted sun: the front quad's opaque half casts a shadow on the backdrop, its transparent
+    // half does not.
+    canopy::light_options light;
+    light.sun_direction = canopy::normalize(vec3<float>(0.6f, 0.3f, 1.0f));
+    float const cos_sun = light.sun_direction.z; // both quads face +z
+    auto const lit = [&](vec3<float> albedo) { return albedo * light.ambient + albedo * light.sun_colour * cos_sun; };
+    auto const shadowed = [&](vec3<float> albedo) { return albedo * light.ambient; };
+    vec3<float> const front_opaque_albedo(opaque_texel.x, opaque_texel.y, opaque_texel.z);
+    vec3<float> const front_hole_albedo(transparent_texel.x, transparent_texel.y, transparent_texel.z);
+
+    auto const masked = render_primary(scene, mask, light);
+    auto const unmasked = render_primary(scene, canopy::default_intersector{}, light);
+    auto const behind = render_primary(backdrop_only, backdrop_mask, light);
+
+    auto const camera = layered_camera(width, height);
+    double const margin = 2e-3; // in texture coordinates of the front quad
+    int over_hole = 0, over_opaque = 0, beside = 0, shadow_pixels = 0, mismatches = 0;
+    for (int y = 0; y < height; ++y)
+        for (int x = 0; x < width; ++x) {
+            canopy::ray const r = pixel_ray(camera, x, y, width, height);
+            vec2<double> const uv = front_uv(meet_plane(r, front_z));
+            double const inside = inside_distance(uv);
+            if (std::fabs(inside) < margin || (inside > 0.0 && std::fabs(uv.x - 0.5) < margin)) continue;
+            bool const on_front = inside > 0.0;
+            bool const on_opaque = on_front && uv.x > 0.5;
+
+            // The backdrop point seen along the ray, and where its shadow ray crosses the front plane.
+            plane_point const p = meet_plane(r, back_z);
+            double const rise = double(front_z - back_z) / double(light.sun_direction.z);
+            vec2<double> const shadow_uv = front_uv({p.x + rise * double(light.sun_direction.x),
+                                                     p.y + rise * double(light.sun_direction.y)});
+            double const shadow_inside = inside_distance(shadow_uv);
+            if (!on_opaque && (std::fabs(shadow_inside) < margin ||
+                               (shadow_inside > 0.0 && std::fabs(shadow_uv.x - 0.5) < margin)))
+                continue;
+            bool const in_shadow = shadow_inside > 0.0 && shadow_uv.x > 0.5;
+
+            vec4<float> const got = masked.at(x, y);
+            vec3<float> expected;
+            if (on_opaque) {
+                expected = lit(front_opaque_albedo);
+                ++over_opaque;
+            } else {
+                expected = in_shadow ? shadowed(back_albedo) : lit(back_albedo);
+                shadow_pixels += in_shadow;
+                ++(on_front ? over_hole : beside);
+            }
+            bool ok = close(got, expected);
+            // Through a hole, and with no shadow of the opaque half, the pixel is exactly the
+            // pixel of the scene without the front quad.
+            if (!on_opaque && !in_shadow) ok = ok && same(got, behind.at(x, y));
+            // Without the mask, the whole front quad is seen, holes included.
+            if (on_front) ok = ok && close(unmasked.at(x, y), lit(on_opaque ? front_opaque_albedo : front_hole_albedo));
+            if (!ok) {
+                ++mismatches;
+                if (mismatches <= 5)
+                    UNSCOPED_INFO("pixel (" << x << ", " << y << ") uv (" << uv.x << ", " << uv.y << "): got "
+                                            << to_string(got) << ", expected " << to_string({expected, 1.0f})
+                                            << ", without the mask " << to_string(unmasked.at(x, y)));
+            }
+        }
+    CHECK(mismatches == 0);
+    CHECK(over_hole > 100);
+    CHECK(over_opaque > 100);
+    CHECK(beside > 500);
+    CHECK(shadow_pixels > 20);
+}
+
+TEST_CASE("the procedural mask pattern appears where its rule says") {
+    auto const scene = make_layered_scene(front_kind::procedural);
+    canopy::procedural_alpha_mask mask;
+    mask.scene = &scene;
+    int const w = 160, h = 120;
+    auto const camera = layered_camera(w, h);
+
+    // The rule, written out: d = 2·|uv − (½, ½)|; keep where d < 1 and frac(5d) < 0.6.
+    double const margin = 2e-3;
+    auto const rule = [&](vec2<double> uv) -> std::optional<bool> {
+        double const d = 2.0 * std::hypot(uv.x - 0.5, uv.y - 0.5);
+        double const rings = 5.0 * d;
+        double const frac = rings - std::floor(rings);
+        bool const near_ring_edge = std::fabs(rings - std::round(rings)) < 5.0 * margin ||
+                                    std::fabs(frac - 0.6) < 5.0 * margin;
+        if (near_ring_edge || std::fabs(d - 1.0) < margin) return std::nullopt;
+        return d < 1.0 && frac < 0.6;
+    };
+
+    int checked = 0, kept = 0, cut = 0, mismatches = 0, uv_errors = 0;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            canopy::ray const r = pixel_ray(camera, x, y, w, h);
+            vec2<double> const uv = front_uv(meet_plane(r, front_z));
+            double const inside = inside_distance(uv);
+            if (std::fabs(inside) < margin) continue;
+            bool expect_front = false;
+            if (inside > 0.0) {
+                auto const keeps = rule(uv);
+                if (!keeps) continue;
+                expect_front = *keeps;
+                ++(expect_front ? kept : cut);
+            }
+            ++checked;
+            auto const hit = scene.closest_hit(r, mask);
+            REQUIRE(hit.hit);
+            bool const got_front = hit.geom_id == std::uint32_t(front_mesh);
+            if (got_front != expect_front) {
+                ++mismatches;
+                if (mismatches <= 5)
+                    UNSCOPED_INFO("pixel (" << x << ", " << y << ") uv (" << uv.x << ", " << uv.y << "): front quad "
+                                            << (got_front ? "hit" : "missed") << ", the rule says "
+                                            << (expect_front ? "kept" : "cut"));
+            }
+            if (got_front) {
+                vec2<float> const hit_uv = scene.uv(hit);
+                uv_errors += std::fabs(double(hit_uv.x) - uv.x) > 1e-4 || std::fabs(double(hit_uv.y) - uv.y) > 1e-4;
+            } else {
+                CHECK(hit.geom_id == std::uint32_t(back_mesh));
+            }
+        }
+    CHECK(mismatches == 0);
+    CHECK(uv_errors == 0);
+    CHECK(kept > 500);
+    CHECK(cut > 500);
+    CHECK(checked > w * h * 8 / 10);
+}
+
+namespace {
+
+// A counter written independently of canopy::bvh_costs: an overload set, no base class.
+struct test_counter {
+    std::uint64_t* boxes;
+    std::uint64_t* triangles;
+
+    template <typename Ray, typename InvDir>
+    auto operator()(Ray const& r, canopy::aabb const& box, InvDir const& inv_dir) {
+        ++*boxes;
+        return intersect(r, box, inv_dir);
+    }
+    template <typename Ray>
+    auto operator()(Ray const& r, canopy::triangle const& tri) {
+        ++*triangles;
+        return intersect(r, tri);
+    }
+};
+
+} // namespace
+
+TEST_CASE("the heat map's total equals the counting intersector's totals") {
+    auto const forest = small_forest();
+    auto const& scene = forest.scene;
+    auto const camera = forest_camera(forest);
+
+    // The cost image: per pixel the paper's bvh_costs counts, (boxes, triangles, sum).
+    canopy::framebuffer costs(width, height);
+    canopy::render_tiles(costs, [&](int x, int y) {
+        canopy::bvh_costs counter;
+        scene.closest_hit(pixel_ray(camera, x, y, width, height), counter);
+        return vec4<float>(float(counter.num_boxes), float(counter.num_tris),
+                           float(counter.num_boxes + counter.num_tris), 1.0f);
+    }, {.tile_size = 8, .progress = {}});
+    std::uint64_t image_boxes = 0, image_triangles = 0, image_total = 0;
+    for (auto const& p : costs.pixels) {
+        image_boxes += std::uint64_t(p.x);
+        image_triangles += std::uint64_t(p.y);
+        image_total += std::uint64_t(p.z);
+    }
+
+    // A second pass over the same rays, one thread, the separately written counter.
+    std::uint64_t boxes = 0, triangles = 0;
+    std::vector<std::uint64_t> reference_costs;
+    int pixel_mismatches = 0, hit_mismatches = 0, billboard_pixels = 0;
+    for (int y = 0; y < height; ++y)
+        for (int x = 0; x < width; ++x) {
+            std::uint64_t pixel_boxes = 0, pixel_triangles = 0;
+            test_counter counter{&pixel_boxes, &pixel_triangles};
+            canopy::ray const r = pixel_ray(camera, x, y, width, height);
+            auto const counted = scene.closest_hit(r, counter);
+            boxes += pixel_boxes;
+            triangles += pixel_triangles;
+            reference_costs.push_back(pixel_boxes + pixel_triangles);
+            pixel_mismatches += std::uint64_t(costs.at(x, y).x) != pixel_boxes ||
+                                std::uint64_t(costs.at(x, y).y) != pixel_triangles;
+            // Counting does not change what is hit.
+            canopy::default_intersector none;
+            auto const plain = scene.closest_hit(r, none);
+            hit_mismatches += counted.hit != plain.hit || (plain.hit && (counted.t != plain.t ||
+                                                                         counted.prim_id != plain.prim_id ||
+                                                                         counted.inst_id != plain.inst_id));
+            if (plain.hit && plain.geom_id == 2) {
+                ++billboard_pixels;
+                // Reaching a billboard's triangle takes at least the root box and one triangle test.
+                CHECK(pixel_boxes >= 1);
+                CHECK(pixel_triangles >= 1);
+            }
+        }
+    CHECK(pixel_mismatches == 0);
+    CHECK(hit_mismatches == 0);
+    CHECK(image_boxes == boxes);
+    CHECK(image_triangles == triangles);
+    CHECK(image_total == boxes + triangles);
+    CHECK(billboard_pixels > 50);
+    CHECK(triangles > std::uint64_t(width * height));
+
+    // The heat colours of the image are the heat colours of the second pass's counts.
+    float const max_cost = float(image_total) / float(width * height) * 2.0f;
+    int colour_mismatches = 0;
+    for (std::size_t i = 0; i < costs.pixels.size(); ++i) {
+        vec3<float> const a = canopy::heat_colour(costs.pixels[i].z, max_cost);
+        vec3<float> const b = canopy::heat_colour(float(reference_costs[i]), max_cost);
+        colour_mismatches += a.x != b.x || a.y != b.y || a.z != b.z;
+    }
+    CHECK(colour_mismatches == 0);
+}
+
+namespace {
+
+enum class kernel_kind { primary, ao, path };
+
+// The forest rendered with the texture alpha mask by one kernel, under `threads` worker threads.
+canopy::framebuffer render_forest(canopy::billboard_forest const& forest, kernel_kind kernel, int threads,
+                                  int tile_size = 16) {
+    tbb::global_control const limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+    canopy::texture_alpha_mask mask;
+    mask.scene = &forest.scene;
+    auto const camera = forest_camera(forest);
+    int const spp = kernel == kernel_kind::path ? 2 : 1;
+    canopy::framebuffer fb(width, height);
+    canopy::render_tiles(fb, [&](int x, int y) {
+        vec4<float> sum;
+        for (int s = 0; s < spp; ++s) {
+            canopy::pixel_random rng(3u, x, y, s);
+            float const jx = spp > 1 ? rng.next() : 0.5f, jy = spp > 1 ? rng.next() : 0.5f;
+            canopy::ray const r = camera.primary_ray(float(x) + jx, float(y) + jy, width, height);
+            switch (kernel) {
+            case kernel_kind::primary: sum = sum + canopy::primary_kernel(forest.scene, r, mask); break;
+            case kernel_kind::ao: sum = sum + canopy::ao_kernel(forest.scene, r, mask, rng, 8, 2.0f); break;
+            case kernel_kind::path: sum = sum + canopy::path_kernel(forest.scene, r, mask, rng, 3); break;
+            }
+        }
+        return sum * (1.0f / float(spp));
+    }, {.tile_size = tile_size, .progress = {}});
+    return fb;
+}
+
+int differing_pixels(canopy::framebuffer const& a, canopy::framebuffer const& b) {
+    int n = 0;
+    for (std::size_t i = 0; i < a.pixels.size(); ++i) n += !same(a.pixels[i], b.pixels[i]);
+    return n;
+}
+
+} // namespace
+
+TEST_CASE("images are identical for 1 and 2 threads, across runs and tile sizes") {
+    auto const forest = small_forest();
+    for (auto const [kernel, name] : {std::pair{kernel_kind::primary, "primary"}, std::pair{kernel_kind::ao, "ao"},
+                                      std::pair{kernel_kind::path, "path"}}) {
+        INFO("kernel " << name);
+        auto const one = render_forest(forest, kernel, 1);
+        auto const two = render_forest(forest, kernel, 2);
+        auto const again = render_forest(forest, kernel, 2);
+        auto const odd_tiles = render_forest(forest, kernel, 2, 7);
+        CHECK(differing_pixels(one, two) == 0);
+        CHECK(differing_pixels(two, again) == 0);
+        CHECK(differing_pixels(one, odd_tiles) == 0);
+
+        // Not a blank image: several distinct colours.
+        int distinct = 0;
+        for (std::size_t i = 1; i < one.pixels.size(); ++i) distinct += one.pixels[i].x != one.pixels[i - 1].x;
+        CHECK(distinct > int(one.pixels.size()) / 10);
+    }
+}

@@ -1,0 +1,470 @@
+// Tests of the `canopy` command line. `canopy trace` is run on scene and ray files generated here
+// and its .hits output is compared, byte for byte, with closest_hit / any_hit of the library
+// called in this test on the same geometry (with the bench alpha intersector for
+// `--intersector alpha`); bad input and bad options must fail with a message; `canopy render`
+// must write readable images of the requested size.
+#include <catch2/catch.hpp>
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+#include <sys/wait.h>
+#include <unistd.h>
+
+import canopy.query;
+import canopy.bench_formats;
+import canopy.procedural;
+import canopy.image_io;
+
+namespace {
+
+namespace fs = std::filesystem;
+using canopy::vec3;
+
+constexpr float inf = std::numeric_limits<float>::infinity();
+constexpr float nan = std::numeric_limits<float>::quiet_NaN();
+
+// A folder of its own for each test case, removed afterwards.
+struct temp_folder {
+    fs::path path;
+    temp_folder() : path(fs::temp_directory_path() / ("canopy_cli_test_" + std::to_string(::getpid()))) {
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~temp_folder() {
+        std::error_code ignored;
+        fs::remove_all(path, ignored);
+    }
+    temp_folder(temp_folder const&) = delete;
+    temp_folder& operator=(temp_folder const&) = delete;
+};
+
+struct run_result {
+    int exit_code = -1;
+    std::string output; // stdout and stderr
+};
+
+// Runs the canopy program with the given arguments (each single-quoted for the shell).
+run_result run_canopy(std::vector<std::string> const& args) {
+    std::string command = "'" CANOPY_CLI "'";
+    for (auto const& a : args) command += " '" + a + "'";
+    command += " 2>&1";
+    run_result result;
+    FILE* pipe = ::popen(command.c_str(), "r");
+    REQUIRE(pipe != nullptr);
+    char buffer[4096];
+    while (std::size_t const n = std::fread(buffer, 1, sizeof buffer, pipe)) result.output.append(buffer, n);
+    int const status = ::pclose(pipe);
+    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    return result;
+}
+
+std::string read_bytes(fs::path const& file) {
+    std::ifstream in(file, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void write_bytes(fs::path const& file, std::string const& bytes) {
+    std::ofstream out(file, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+// ---- the generated scene --------------------------------------------------------------------
+
+// Two overlapping icospheres in one mesh: prim i is the i-th triangle.
+std::vector<canopy::triangle> make_mesh() {
+    auto triangles = canopy::make_icosphere(2, {0.0f, 0.0f, 0.0f}, 1.0f);
+    for (auto const& t : canopy::make_icosphere(1, {1.1f, 0.4f, 0.2f}, 0.6f)) triangles.push_back(t);
+    for (std::size_t i = 0; i < triangles.size(); ++i) triangles[i].prim_id = std::uint32_t(i);
+    return triangles;
+}
+
+// Instances of the mesh on a 3 × 3 × 2 lattice, each rotated about an axis and scaled, some
+// overlapping their neighbours. Rows of the 3 × 4 object→world matrices.
+std::vector<std::array<float, 12>> make_instances() {
+    std::vector<std::array<float, 12>> rows;
+    int k = 0;
+    for (int layer = 0; layer < 2; ++layer)
+        for (int j = 0; j < 3; ++j)
+            for (int i = 0; i < 3; ++i, ++k) {
+                float const angle = 0.37f * float(k), s = 0.6f + 0.1f * float(k % 5);
+                float const c = std::cos(angle) * s, n = std::sin(angle) * s;
+                rows.push_back({c, 0.0f, n, 2.2f * float(i), 0.0f, s, 0.0f, 2.0f * float(j), -n, 0.0f, c,
+                                -2.5f * float(layer)});
+            }
+    return rows;
+}
+
+std::string number(float f) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.9g", double(f));
+    return text;
+}
+
+void write_obj(fs::path const& file, std::vector<canopy::triangle> const& triangles) {
+    std::string text = "# generated: two icospheres\n";
+    for (auto const& t : triangles)
+        for (auto const& v : {t.v0, t.v1, t.v2}) text += "v " + number(v.x) + " " + number(v.y) + " " + number(v.z) + "\n";
+    // Faces written alternately with absolute, negative (relative) and a/b/c indices.
+    for (std::size_t i = 0; i < triangles.size(); ++i) {
+        std::size_t const first = 3 * i + 1;
+        if (i % 3 == 0)
+            text += "f " + std::to_string(first) + " " + std::to_string(first + 1) + " " + std::to_string(first + 2) + "\n";
+        else if (i % 3 == 1)
+            text += "f " + std::to_string(first) + "/1/1 " + std::to_string(first + 1) + "//2 " +
+                    std::to_string(first + 2) + "/3\n";
+        else
+            text += "f -" + std::to_string(3 * triangles.size() - first + 1) + " -" +
+                    std::to_string(3 * triangles.size() - first) + " -" +
+                    std::to_string(3 * triangles.size() - first - 1) + "\n";
+    }
+    write_bytes(file, text);
+}
+
+void write_inst(fs::path const& file, std::string const& mesh_name, std::vector<std::array<float, 12>> const& rows) {
+    std::string text = "# generated lattice of instances\nmesh " + mesh_name + "\n";
+    for (auto const& r : rows) {
+        for (float f : r) text += number(f) + " ";
+        text += "\n";
+    }
+    write_bytes(file, text);
+}
+
+// Rays from outside aimed into the scene (direction lengths vary), rays from inside the spheres,
+// and rays with narrow [tmin, tmax] windows.
+std::vector<canopy::ray> make_rays(canopy::aabb const& bounds) {
+    std::mt19937 rng(2024);
+    auto uniform = [&](float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(rng); };
+    auto inside_bounds = [&] {
+        return vec3<float>(uniform(bounds.min.x, bounds.max.x), uniform(bounds.min.y, bounds.max.y),
+                           uniform(bounds.min.z, bounds.max.z));
+    };
+    vec3<float> const centre = (bounds.min + bounds.max) * 0.5f;
+    float const radius = canopy::length(bounds.max - bounds.min);
+    auto outside = [&] {
+        return centre + canopy::normalize(vec3<float>(uniform(-1, 1), uniform(-1, 1), uniform(-1, 1))) * radius;
+    };
+    std::vector<canopy::ray> rays;
+    for (int k = 0; k < 1200; ++k) {
+        vec3<float> const origin = outside();
+        rays.push_back({origin, 0.0f, (inside_bounds() - origin) * uniform(0.1f, 3.0f), inf});
+    }
+    for (int k = 0; k < 300; ++k)
+        rays.push_back({inside_bounds(), 0.0f, vec3<float>(uniform(-1, 1), uniform(-1, 1), uniform(-1, 1)), inf});
+    for (int k = 0; k < 300; ++k) {
+        vec3<float> const origin = outside();
+        float const tmin = uniform(0.0f, 1.0f);
+        rays.push_back({origin, tmin, inside_bounds() - origin, tmin + uniform(0.0f, 0.5f)});
+    }
+    return rays;
+}
+
+// Rays that FORMATS.md says must not crash anything and count as misses: NaN and infinite
+// origins, directions and extents, zero directions, empty [tmin, tmax].
+std::vector<canopy::ray> make_degenerate_rays(canopy::aabb const& bounds) {
+    vec3<float> const c = (bounds.min + bounds.max) * 0.5f;
+    vec3<float> const front = c + vec3<float>(0.0f, 0.0f, 2.0f * canopy::length(bounds.max - bounds.min));
+    return {{{nan, c.y, c.z}, 0.0f, {1.0f, 0.0f, 0.0f}, inf},
+            {front, 0.0f, {0.0f, nan, -1.0f}, inf},
+            {front, 0.0f, {0.0f, 0.0f, -inf}, inf},
+            {{inf, c.y, c.z}, 0.0f, {-1.0f, 0.0f, 0.0f}, inf},
+            {{inf, inf, inf}, 0.0f, {-1.0f, -1.0f, -1.0f}, inf},
+            {{-inf, -inf, -inf}, 0.0f, {1.0f, 1.0f, 1.0f}, inf},
+            {{inf, -inf, inf}, 0.0f, {-1.0f, 1.0f, -1.0f}, inf},
+            {front, 0.0f, {0.0f, 0.0f, 0.0f}, inf},
+            {c, 0.0f, {0.0f, 0.0f, 0.0f}, inf},
+            {front, 0.0f, {0.0f, 0.0f, -1.0f}, nan},
+            {front, nan, {0.0f, 0.0f, -1.0f}, inf},
+            {front, 5.0f, {0.0f, 0.0f, -1.0f}, 1.0f}};
+}
+
+// The .hits record of a library hit record, written here field by field (FORMATS.md).
+std::string hit_bytes(canopy::basic_hit_record<float> const& hr) {
+    float const t = hr.hit ? hr.t : inf;
+    std::uint32_t const prim = hr.hit ? hr.prim_id : canopy::invalid_id;
+    std::uint32_t const inst = hr.hit ? hr.inst_id : canopy::invalid_id;
+    float const u = hr.hit ? hr.u : 0.0f, v = hr.hit ? hr.v : 0.0f;
+    char record[20];
+    std::memcpy(record + 0, &t, 4);
+    std::memcpy(record + 4, &prim, 4);
+    std::memcpy(record + 8, &inst, 4);
+    std::memcpy(record + 12, &u, 4);
+    std::memcpy(record + 16, &v, 4);
+    return {record, sizeof record};
+}
+
+struct hit_fields {
+    float t;
+    std::uint32_t prim, inst;
+    float u, v;
+};
+
+hit_fields fields_at(std::string const& bytes, std::size_t i) {
+    hit_fields h;
+    char const* p = bytes.data() + 20 * i;
+    std::memcpy(&h.t, p + 0, 4);
+    std::memcpy(&h.prim, p + 4, 4);
+    std::memcpy(&h.inst, p + 8, 4);
+    std::memcpy(&h.u, p + 12, 4);
+    std::memcpy(&h.v, p + 16, 4);
+    return h;
+}
+
+// The generated files and the same geometry built in memory.
+struct trace_fixture {
+    temp_folder folder;
+    std::vector<canopy::triangle> triangles = make_mesh();
+    std::vector<std::array<float, 12>> rows = make_instances();
+    canopy::bvh<canopy::triangle> mesh;
+    std::vector<canopy::instance<canopy::bvh<canopy::triangle>>> instances;
+    canopy::bvh<canopy::instance<canopy::bvh<canopy::triangle>>> top;
+    std::vector<canopy::ray> mesh_rays, lattice_rays;
+    fs::path obj, inst, mesh_rays_file, lattice_rays_file;
+
+    trace_fixture() {
+        obj = folder.path / "mesh.obj";
+        inst = folder.path / "lattice.inst";
+        mesh_rays_file = folder.path / "mesh.rays";
+        lattice_rays_file = folder.path / "lattice.rays";
+        write_obj(obj, triangles);
+        write_inst(inst, "mesh.obj", rows);
+        mesh = canopy::build_binned_sah(triangles);
+        for (std::size_t k = 0; k < rows.size(); ++k)
+            instances.emplace_back(mesh, canopy::affine_transform<float>::from_rows(rows[k]), std::uint32_t(k));
+        top = canopy::build_binned_sah(instances);
+        mesh_rays = make_rays(mesh.bounds());
+        lattice_rays = make_rays(top.bounds());
+        canopy::write_bench_rays(mesh_rays_file, mesh_rays);
+        canopy::write_bench_rays(lattice_rays_file, lattice_rays);
+    }
+
+    std::vector<canopy::ray> const& rays(bool instanced) const { return instanced ? lattice_rays : mesh_rays; }
+    fs::path const& scene_file(bool instanced) const { return instanced ? inst : obj; }
+    fs::path const& rays_file(bool instanced) const { return instanced ? lattice_rays_file : mesh_rays_file; }
+
+    template <typename I>
+    canopy::basic_hit_record<float> reference(canopy::ray const& r, bool instanced, bool closest, I isect) const {
+        if (instanced)
+            return closest ? canopy::closest_hit(r, &top, &top + 1, isect) : canopy::any_hit(r, &top, &top + 1, isect);
+        return closest ? canopy::closest_hit(r, &mesh, &mesh + 1, isect) : canopy::any_hit(r, &mesh, &mesh + 1, isect);
+    }
+
+    canopy::basic_hit_record<float> reference(canopy::ray const& r, bool instanced, bool closest, bool alpha) const {
+        return alpha ? reference(r, instanced, closest, canopy::bench_alpha_intersector{})
+                     : reference(r, instanced, closest, canopy::default_intersector{});
+    }
+};
+
+// The alpha rule of FORMATS.md, written out: rejected when floor(8u) + floor(8v) is odd.
+bool alpha_rule_keeps(float u, float v) {
+    auto const cell = [](float x) { return int(std::floor(8.0f * std::fmin(std::fmax(x, 0.0f), 1.0f))); };
+    return (cell(u) + cell(v)) % 2 == 0;
+}
+
+} // namespace
+
+TEST_CASE("canopy trace --query closest equals the library's closest_hit, byte for byte") {
+    trace_fixture const f;
+    for (bool const instanced : {false, true})
+        for (bool const alpha : {false, true})
+            for (char const* threads : {"1", "2"}) {
+                INFO((instanced ? "instanced .inst scene" : "single-mesh .obj scene")
+                     << (alpha ? ", alpha intersector" : ", no intersector") << ", threads " << threads);
+                fs::path const out = f.folder.path / "closest.hits";
+                std::vector<std::string> args{"trace", "--scene", f.scene_file(instanced).string(), "--rays",
+                                              f.rays_file(instanced).string(), "--query", "closest", "--out",
+                                              out.string(), "--threads", threads};
+                if (alpha) args.insert(args.end(), {"--intersector", "alpha"});
+                auto const result = run_canopy(args);
+                INFO(result.output);
+                REQUIRE(result.exit_code == 0);
+                CHECK(result.output.find("Mrays/s") != std::string::npos);
+
+                auto const& rays = f.rays(instanced);
+                std::string const got = read_bytes(out);
+                REQUIRE(got.size() == 20 * rays.size());
+                int mismatches = 0, hits = 0, rule_violations = 0;
+                for (std::size_t i = 0; i < rays.size(); ++i) {
+                    auto const expected = f.reference(rays[i], instanced, true, alpha);
+                    hits += expected.hit;
+                    if (got.compare(20 * i, 20, hit_bytes(expected)) != 0) {
+                        ++mismatches;
+                        auto const h = fields_at(got, i);
+                        if (mismatches <= 5)
+                            UNSCOPED_INFO("ray " << i << ": got t=" << h.t << " prim=" << h.prim << " inst=" << h.inst
+                                                 << " u=" << h.u << " v=" << h.v << "; expected hit=" << expected.hit
+                                                 << " t=" << expected.t << " prim=" << expected.prim_id
+                                                 << " inst=" << expected.inst_id);
+                    }
+                    auto const h = fields_at(got, i);
+                    if (alpha && h.prim != canopy::invalid_id) rule_violations += !alpha_rule_keeps(h.u, h.v);
+                    if (!instanced) CHECK(h.inst == canopy::invalid_id);
+                }
+                CHECK(mismatches == 0);
+                CHECK(rule_violations == 0);
+                CHECK(hits > int(rays.size()) / 4);
+                fs::remove(out);
+            }
+}
+
+TEST_CASE("canopy trace --query any agrees with the library's any_hit on hit or miss") {
+    trace_fixture const f;
+    for (bool const instanced : {false, true})
+        for (bool const alpha : {false, true}) {
+            INFO((instanced ? "instanced .inst scene" : "single-mesh .obj scene")
+                 << (alpha ? ", alpha intersector" : ", no intersector"));
+            fs::path const out = f.folder.path / "any.hits";
+            std::vector<std::string> args{"trace", "--scene", f.scene_file(instanced).string(), "--rays",
+                                          f.rays_file(instanced).string(), "--query", "any", "--out", out.string()};
+            if (alpha) args.insert(args.end(), {"--intersector", "alpha"});
+            auto const result = run_canopy(args);
+            INFO(result.output);
+            REQUIRE(result.exit_code == 0);
+
+            auto const& rays = f.rays(instanced);
+            std::string const got = read_bytes(out);
+            REQUIRE(got.size() == 20 * rays.size());
+            int mismatches = 0, malformed = 0, hits = 0;
+            for (std::size_t i = 0; i < rays.size(); ++i) {
+                bool const expected = f.reference(rays[i], instanced, false, alpha).hit;
+                // Any-hit and closest-hit agree on whether something is hit.
+                CHECK(expected == f.reference(rays[i], instanced, true, alpha).hit);
+                auto const h = fields_at(got, i);
+                bool const reported = h.prim != canopy::invalid_id;
+                hits += reported;
+                mismatches += reported != expected;
+                if (reported) {
+                    bool const in_window = h.t >= rays[i].tmin && h.t <= rays[i].tmax;
+                    malformed += !in_window || (h.prim != canopy::occluded_unreported && h.prim >= f.triangles.size());
+                } else {
+                    malformed += !(h.t == inf) || h.inst != canopy::invalid_id;
+                }
+            }
+            CHECK(mismatches == 0);
+            CHECK(malformed == 0);
+            CHECK(hits > int(rays.size()) / 4);
+        }
+}
+
+TEST_CASE("canopy trace survives NaN and infinite rays and zero directions: they miss") {
+    trace_fixture const f;
+    for (bool const instanced : {false, true}) {
+        auto const rays = make_degenerate_rays(instanced ? f.top.bounds() : f.mesh.bounds());
+        fs::path const rays_file = f.folder.path / "degenerate.rays";
+        canopy::write_bench_rays(rays_file, rays);
+        for (char const* query : {"closest", "any"})
+            for (char const* isect : {"none", "alpha"}) {
+                INFO(f.scene_file(instanced).filename().string() << ", " << query << ", intersector " << isect);
+                fs::path const out = f.folder.path / "degenerate.hits";
+                auto const result = run_canopy({"trace", "--scene", f.scene_file(instanced).string(), "--rays",
+                                                rays_file.string(), "--query", query, "--out", out.string(),
+                                                "--intersector", isect});
+                INFO(result.output);
+                CHECK(result.exit_code == 0);
+                if (result.exit_code != 0) continue;
+                std::string const got = read_bytes(out);
+                REQUIRE(got.size() == 20 * rays.size());
+                for (std::size_t i = 0; i < rays.size(); ++i) {
+                    INFO("ray " << i);
+                    CHECK(fields_at(got, i).prim == canopy::invalid_id);
+                    CHECK(fields_at(got, i).t == inf);
+                }
+            }
+    }
+}
+
+TEST_CASE("canopy trace rejects a ray file whose size is not a multiple of 32, naming the file") {
+    trace_fixture const f;
+    fs::path const bad = f.folder.path / "truncated.rays";
+    write_bytes(bad, read_bytes(f.mesh_rays_file).substr(0, 32 * 3 + 5));
+    auto const result = run_canopy({"trace", "--scene", f.obj.string(), "--rays", bad.string(), "--query", "closest",
+                                    "--out", (f.folder.path / "bad.hits").string()});
+    INFO(result.output);
+    CHECK(result.exit_code != 0);
+    CHECK(result.output.find(bad.string()) != std::string::npos);
+    CHECK(result.output.find("32") != std::string::npos);
+
+    auto const missing = run_canopy({"trace", "--scene", f.obj.string(), "--rays", (f.folder.path / "none.rays").string(),
+                                     "--query", "closest", "--out", (f.folder.path / "bad.hits").string()});
+    INFO(missing.output);
+    CHECK(missing.exit_code != 0);
+    CHECK(missing.output.find("none.rays") != std::string::npos);
+}
+
+TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") {
+    temp_folder const folder;
+    std::string const out = (folder.path / "x.hits").string();
+    struct bad_call {
+        std::vector<std::string> args;
+        char const* usage;
+    };
+    std::vector<bad_call> const calls{
+        {{"trace", "--bogus", "1"}, "usage: canopy trace"},
+        {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "nearest", "--out", out}, "usage: canopy trace"},
+        {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "closest"}, "usage: canopy trace"},
+        {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "closest", "--out", out, "--intersector", "cheap"},
+         "usage: canopy trace"},
+        {{"trace", "--scene"}, "usage: canopy trace"},
+        {{"render", "--frobnicate", "3"}, "usage: canopy render"},
+        {{"render", "--size", "big"}, "usage: canopy render"},
+        {{"render", "--kernel", "raster"}, "usage: canopy render"},
+        {{"info"}, "usage: canopy info"},
+        {{"paint"}, "usage: canopy"},
+        {{}, "usage: canopy"},
+    };
+    for (auto const& call : calls) {
+        std::string joined;
+        for (auto const& a : call.args) joined += a + " ";
+        INFO("canopy " << joined);
+        auto const result = run_canopy(call.args);
+        INFO(result.output);
+        CHECK(result.exit_code != 0);
+        CHECK(result.output.find(call.usage) != std::string::npos);
+    }
+    for (char const* command : {"trace", "render", "info"}) {
+        INFO("canopy " << command << " --help");
+        auto const result = run_canopy({command, "--help"});
+        CHECK(result.exit_code == 0);
+        CHECK(result.output.find(std::string("usage: canopy ") + command) != std::string::npos);
+    }
+}
+
+TEST_CASE("canopy render with no scene writes the four Figure-1 images at the requested size") {
+    temp_folder const folder;
+    fs::path const out = folder.path / "figures";
+    auto const result = run_canopy({"render", "-o", out.string(), "--size", "40x30"});
+    INFO(result.output);
+    REQUIRE(result.exit_code == 0);
+    CHECK(result.output.find("Mrays/s") != std::string::npos);
+    for (char const* name : {"1_billboards_alpha_ignored.png", "2_texture_alpha_mask.png",
+                             "3_procedural_alpha_mask.png", "4_bvh_cost_heatmap.png"}) {
+        INFO(name);
+        REQUIRE(fs::exists(out / name));
+        auto const image = canopy::read_image(out / name);
+        CHECK(image.width == 40);
+        CHECK(image.height == 30);
+    }
+}
+
+TEST_CASE("canopy render SCENE writes one image named after the scene") {
+    temp_folder const folder;
+    write_obj(folder.path / "mesh.obj", make_mesh());
+    write_inst(folder.path / "lattice.inst", "mesh.obj", make_instances());
+    auto const result = run_canopy({"render", (folder.path / "lattice.inst").string(), "-o", folder.path.string(),
+                                    "--size", "32x24", "--intersector", "alpha"});
+    INFO(result.output);
+    REQUIRE(result.exit_code == 0);
+    REQUIRE(fs::exists(folder.path / "lattice.png"));
+    auto const image = canopy::read_image(folder.path / "lattice.png");
+    CHECK(image.width == 32);
+    CHECK(image.height == 24);
+}
