@@ -3,7 +3,7 @@
 # canopy_isa      PUBLIC on the module targets: ISA and floating-point semantics must be identical
 #                 for a module and its importers (a BMI built with -march=X cannot be imported
 #                 without it, and templates are instantiated with the importer's flags).
-# canopy_warnings PRIVATE to each target of this project.
+# Warnings: CMAKE_CXX_FLAGS of this project only (never exported).
 
 add_library(canopy_isa INTERFACE)
 if(CANOPY_ARCH)
@@ -18,9 +18,11 @@ if(CANOPY_SANITIZE)
   target_link_options(canopy_isa INTERFACE "-fsanitize=${canopy_sanitizers}")
 endif()
 
-add_library(canopy_warnings INTERFACE)
-target_compile_options(canopy_warnings INTERFACE -Wall -Wextra -Wpedantic -Wshadow -Wconversion
-                       -Wno-sign-conversion)
+# Warnings for everything this project compiles, through CMAKE_CXX_FLAGS so that no target
+# property (which installed module targets export to their importers) carries them.
+string(APPEND CMAKE_CXX_FLAGS " -Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion")
 if(CANOPY_WARNINGS_AS_ERRORS)
-  target_compile_options(canopy_warnings INTERFACE -Werror)
+  string(APPEND CMAKE_CXX_FLAGS " -Werror")
 endif()
+# Kept for the project's executables that name it; the flags above already apply to them.
+add_library(canopy_warnings INTERFACE)

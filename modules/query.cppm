@@ -9,8 +9,9 @@
 // - multi_hit<N> returns up to N accepted hits sorted by t, each (instance path, primitive) once.
 // - Equal t: the hit with the smaller (inst_id, inner_inst_id…, prim_id) wins, so results do not
 //   depend on traversal order (BVH, brute force, packets and threads agree).
-// Packet rays (basic_ray<float8>, …) are supported by closest_hit and any_hit; lanes whose
-// tmin ≤ tmax fails (including NaN) are inactive and report misses.
+// Rays with a NaN or infinite origin or direction component, a NaN tmin/tmax, or tmin > tmax
+// miss without being traced. Packet rays (basic_ray<float8>, …) are supported by closest_hit and
+// any_hit; such lanes are inactive and report misses.
 module;
 #include <array>
 #include <cstddef>
@@ -127,10 +128,18 @@ struct multi_query : instance_path {
     }
 };
 
-// Lanes of a (packet) ray that take part: tmin ≤ tmax (fails for NaN).
+// Lanes of a (packet) ray that take part: finite origin and direction, tmin ≤ tmax (fails for
+// NaN). Other rays miss without being traced.
 template <typename Ray>
 auto active_lanes(Ray const& ray) {
-    return ray.tmin <= ray.tmax;
+    auto const& o = ray.origin;
+    auto const& d = ray.direction;
+    if constexpr (simd::simd_width_v<ray_value_t<Ray>> == 1)
+        return ray.tmin <= ray.tmax && simd::isfinite(o.x) && simd::isfinite(o.y) && simd::isfinite(o.z) &&
+               simd::isfinite(d.x) && simd::isfinite(d.y) && simd::isfinite(d.z);
+    else
+        return (ray.tmin <= ray.tmax) & simd::isfinite(o.x) & simd::isfinite(o.y) & simd::isfinite(o.z) &
+               simd::isfinite(d.x) & simd::isfinite(d.y) & simd::isfinite(d.z);
 }
 
 template <typename Ray, typename It, typename I, typename Query>

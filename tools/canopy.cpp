@@ -166,8 +166,11 @@ int run_trace(std::span<char*> args) {
         threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(n));
     }
 
-    auto const scene = load_scene(required(options, "--scene"));
-    auto const rays = canopy::read_bench_rays(required(options, "--rays"));
+    std::string const scene_path = required(options, "--scene");
+    std::string const rays_path = required(options, "--rays");
+    std::string const out_path = required(options, "--out");
+    auto const scene = load_scene(scene_path);
+    auto const rays = canopy::read_bench_rays(rays_path);
     std::vector<canopy::bench_hit> hits(rays.size());
     bool const closest = query == "closest";
 
@@ -180,7 +183,7 @@ int run_trace(std::span<char*> args) {
                                             : trace_one(*scene, rays[i], closest, none);
     });
     double const trace_seconds = seconds_since(start);
-    canopy::write_bench_hits(required(options, "--out"), hits);
+    canopy::write_bench_hits(out_path, hits);
 
     std::size_t const hit_count = std::size_t(std::count_if(hits.begin(), hits.end(), [](auto const& h) {
         return h.prim != canopy::invalid_id;

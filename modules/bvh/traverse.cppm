@@ -53,8 +53,12 @@ struct child_hits {
     slab(node.min_x, node.max_x, ray.origin.x, ray.inv_dir.x);
     slab(node.min_y, node.max_y, ray.origin.y, ray.inv_dir.y);
     slab(node.min_z, node.max_z, ray.origin.z, ray.inv_dir.z);
+    // Unused slots hold empty boxes, but a NaN or infinite ray can make any box look hit: they
+    // are masked out by their child index.
+    auto const used = simd::int8::load(reinterpret_cast<std::int32_t const*>(node.child.data())) !=
+                      simd::int8(std::int32_t(-1));
     child_hits<float> h;
-    h.mask = simd::movemask(tnear <= tfar);
+    h.mask = simd::movemask((tnear <= tfar) & used);
     tnear.store(h.tnear.data());
     return h;
 }
