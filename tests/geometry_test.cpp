@@ -696,10 +696,14 @@ TEST_CASE("ray/box slab test: grazing faces and edges, zero direction components
     CHECK(slab(make_ray({-1, 0, 0.5f}, {1, 1, 0}), box).hit);   // touches the edge x = 0, y = 1
     CHECK(slab(make_ray({0, -1, 0.5f}, {1, 1, 0}), box).hit);   // touches the edge x = 1, y = 0
     CHECK_FALSE(slab(make_ray({0, -1.001f, 0.5f}, {1, 1, 0}), box).hit);
-    // The entry distance respects tmax exactly; the ray's interval clips the box.
+    // The ray's interval clips the box. tmax is widened by 2γ3 (relative) for box tests, so that a
+    // primitive whose computed t ties tmax is not culled: an entry within that margin still hits,
+    // one beyond it does not.
     canopy::aabb const far_box{{1, 1, 1}, {2, 2, 2}};
+    float const widened = 1.0f + 2.0f * canopy::gamma<float>(3);
     CHECK(slab(make_ray({0, 1.5f, 1.5f}, {1, 0, 0}, 0, 1), far_box).hit);
-    CHECK_FALSE(slab(make_ray({0, 1.5f, 1.5f}, {1, 0, 0}, 0, canopy::next_float_down(1.0f)), far_box).hit);
+    CHECK(slab(make_ray({0, 1.5f, 1.5f}, {1, 0, 0}, 0, canopy::next_float_down(1.0f)), far_box).hit);
+    CHECK_FALSE(slab(make_ray({0, 1.5f, 1.5f}, {1, 0, 0}, 0, 0.9999f / widened), far_box).hit);
     CHECK_FALSE(slab(make_ray({0, 1.5f, 1.5f}, {1, 0, 0}, 2.5f, inf), far_box).hit);
     auto const through = slab(make_ray({0, 1.5f, 1.5f}, {1, 0, 0}), far_box);
     REQUIRE(through.hit);

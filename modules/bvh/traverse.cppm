@@ -39,7 +39,7 @@ struct child_hits {
                                                                    wide_bvh_node<float> const& node) {
     using simd::float8;
     constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
-    float8 tnear(ray.tmin), tfar(ray.tmax);
+    float8 tnear(ray.tmin), tfar(box_test_tmax(ray.tmax));
     auto slab = [&](std::array<float, bvh_width> const& lo, std::array<float, bvh_width> const& hi, float origin,
                     float inv) {
         float8 const t0 = (float8::load(lo.data()) - float8(origin)) * float8(inv);
@@ -145,7 +145,7 @@ bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) 
         for (;;) {
             if (size == 0) return false;
             entry const& e = stack[std::size_t(--size)];
-            if (e.tnear <= detail::widest_tmax(ray.tmax)) {
+            if (e.tnear <= box_test_tmax(detail::widest_tmax(ray.tmax))) {
                 current = e;
                 break;
             }

@@ -13,6 +13,16 @@ import canopy.math;
 
 export namespace canopy {
 
+// The ray's tmax as box tests compare it: widened by 2γ3 (relative), so that a primitive whose
+// computed t equals tmax (a tie, as on a shared edge) is never culled because its box's
+// computed entry distance rounds a little above that t.
+template <typename T>
+[[gnu::always_inline]] inline T box_test_tmax(T const& tmax) {
+    using S = simd::scalar_type_t<T>;
+    constexpr S widen = S(2) * gamma<S>(3);
+    return simd::select(tmax >= T(0), tmax * T(S(1) + widen), tmax * T(S(1) - widen));
+}
+
 template <typename T>
 struct box_hit {
     simd::mask_type_t<T> hit{};
@@ -28,7 +38,7 @@ template <typename T, typename S>
                                                    vec3<T> const& inv_dir) {
     constexpr S far_scale = S(1) + S(2) * gamma<S>(3);
     T tnear = ray.tmin;
-    T tfar = ray.tmax;
+    T tfar = box_test_tmax(ray.tmax);
     for (int axis = 0; axis < 3; ++axis) {
         T const t0 = (T(box.min[axis]) - ray.origin[axis]) * inv_dir[axis];
         T const t1 = (T(box.max[axis]) - ray.origin[axis]) * inv_dir[axis];
