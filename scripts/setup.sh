@@ -16,7 +16,7 @@ apt_packages=(
   libtbb-dev libfmt-dev libopenimageio-dev
   libembree-dev
   glmark2-data libcgal-demo
-  valgrind
+  valgrind libgmp-dev python3-matplotlib
 )
 # The machine image ships Node.js with its own npm; Debian's npm would conflict with it.
 command -v npm >/dev/null 2>&1 || apt_packages+=(npm)
