@@ -521,7 +521,11 @@ namespace {
 // exact, and only rays that cross the fan's height field there (not rays that merely touch the
 // cone's apex or crease), starting just before the target. Interior targets: the hub (shared by 64 triangles) and points of the
 // spokes (shared by 2). Boundary targets: the rim vertices (shared by 2) and rim edge midpoints.
-void trace_through_fans(bool boundary, failure_log& failures, std::size_t& rays) {
+// On the open rim (boundary), the watertight test guarantees no gap between the two triangles
+// sharing a rim vertex or edge, but not a hit: the rounded shear moves the target by up to an
+// ulp, possibly to just outside the mesh. There a miss (or a hit farther on, beyond the target) is
+// allowed and counted in rim_misses; a hit at the target on a triangle not touching it fails.
+void trace_through_fans(bool boundary, failure_log& failures, std::size_t& rays, std::size_t& rim_misses) {
     struct fan_case {
         char const* name;
         std::vector<triangle> tris;
@@ -571,6 +575,11 @@ void trace_through_fans(bool boundary, failure_log& failures, std::size_t& rays)
                 ray const r{o, 1.0f - 0x1p-10f, tg.point - o, inf};
                 record const h = closest(r, b);
                 ++rays;
+                // Rounded off the rim: no hit, or a hit farther on (the target is at t = 1).
+                if (boundary && (!h.hit || h.t > 1.0f + 0x1p-10f)) {
+                    ++rim_misses;
+                    continue;
+                }
                 bool touches = h.hit;
                 for (vec3<float> const& p : tg.touches) touches = touches && has_vertex(fan.tris[h.prim_id], p);
                 if (!touches)
@@ -586,19 +595,21 @@ void trace_through_fans(bool boundary, failure_log& failures, std::size_t& rays)
 TEST_CASE("rays exactly through the hub and the spokes of a 64-triangle fan hit a triangle touching them") {
     failure_log failures;
     std::size_t rays = 0;
-    trace_through_fans(false, failures, rays);
+    std::size_t rim_misses = 0;
+    trace_through_fans(false, failures, rays, rim_misses);
     INFO(rays << " rays");
     CHECK(rays > 10'000);
     require_no_failures(failures, "rays through the hub or a spoke that missed or hit a triangle not touching it");
 }
 
-TEST_CASE("rays exactly through the rim vertices and rim edges of a 64-triangle fan hit a triangle touching them") {
+TEST_CASE("rays exactly through the rim vertices and rim edges of a 64-triangle fan never hit a triangle not touching them") {
     failure_log failures;
-    std::size_t rays = 0;
-    trace_through_fans(true, failures, rays);
-    INFO(rays << " rays");
+    std::size_t rays = 0, rim_misses = 0;
+    trace_through_fans(true, failures, rays, rim_misses);
+    INFO(rays << " rays, " << rim_misses << " rounded off the open rim (allowed)");
     CHECK(rays > 10'000);
-    require_no_failures(failures, "rays through a rim vertex or edge that missed or hit a triangle not touching it");
+    CHECK(rim_misses < rays / 2);
+    require_no_failures(failures, "rays through a rim vertex or edge that hit a triangle not touching it");
 }
 
 // 3 ------------------------------------------------------------------------------------------------

@@ -5,8 +5,10 @@
 // transformed on its own, so triangles sharing a vertex (bit-identical coordinates) see the same
 // transformed vertex and no ray slips between them. The three 2-D edge functions are evaluated
 // with Kahan's FMA difference of products (relative error ≤ 2u, Jeannerod, Louvet, Muller 2013),
-// so their signs are exact for the transformed vertices (barring under/overflow): a ray through a
-// shared edge or vertex gives exact zeros there and hits (edges and vertices are inside).
+// so their signs are exact for the transformed vertices (barring under/overflow). Edges and
+// vertices count as inside, and a ray through an edge or vertex shared by triangles never slips
+// between them. What is not guaranteed: a ray exactly through the *open boundary* of a mesh may
+// hit or miss, since the rounded shear can move the boundary by an ulp (a closed mesh has none).
 //
 // Contracts of every test here: hit iff tmin ≤ t ≤ tmax for the returned t; degenerate
 // (zero-area) triangles never hit; NaN/Inf in the ray make it miss (all tests are accept-style
