@@ -104,7 +104,9 @@ template <typename I, typename Ray, typename Prim>
 
 // The one place that tells leaf primitives from nested structures. Query is a hit accumulator
 // (canopy.query): report(hit_record, ray) accepts or rejects a candidate, tightens ray.tmax as
-// the query allows, and returns true when the whole traversal must stop. Nested structures are
+// the query allows, and returns true when the whole traversal must stop; enter_instance(id) /
+// leave_instance() track the instance path; wants_near_first says whether traversal should order
+// children near to far (closest and multi hit) or need not (any hit). Nested structures are
 // traversed by their own `traverse(ray, structure, isect, query)` (found by ADL), which comes back
 // here for their primitives. Returns true when the query is finished.
 template <typename Ray, typename Prim, typename I, typename Query>

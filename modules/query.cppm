@@ -71,6 +71,7 @@ auto precedes(basic_hit_record<T> const& a, basic_hit_record<T> const& b) {
 
 template <typename T>
 struct closest_query : instance_path {
+    static constexpr bool wants_near_first = true;
     basic_hit_record<T> best;
 
     template <typename Ray>
@@ -87,6 +88,7 @@ struct closest_query : instance_path {
 
 template <typename T>
 struct any_query : instance_path {
+    static constexpr bool wants_near_first = false;
     basic_hit_record<T> found;
     simd::mask_type_t<T> done{};
 
@@ -111,6 +113,7 @@ struct any_query : instance_path {
 template <typename T, std::size_t N>
 struct multi_query : instance_path {
     static_assert(simd::simd_width_v<T> == 1, "multi_hit takes scalar rays");
+    static constexpr bool wants_near_first = true;
     std::array<basic_hit_record<T>, N> hits{};
     std::size_t count = 0;
 

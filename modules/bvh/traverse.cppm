@@ -2,7 +2,7 @@
 // and query.
 //
 // Each visited node tests its children's boxes, nearest hit child first, the others pushed far to
-// near. Which box test runs is decided at compile time:
+// near (queries that stop at any hit, Query::wants_near_first == false, skip the ordering). Which box test runs is decided at compile time:
 // - the intersector has its own box hook → the hook, once per child box (it sees every test);
 // - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls);
 // - otherwise (double rays, packets) → the library's box test, once per child box.
@@ -122,6 +122,17 @@ bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) 
             auto const& node = b.wide_nodes[current.child];
             auto const hits = detail::test_children(ray, node, isect);
             if (hits.mask != 0) {
+                if constexpr (!Query::wants_near_first) {
+                    // Any accepted hit ends the query: visit children in slot order.
+                    std::uint32_t m = hits.mask;
+                    auto const first = std::size_t(std::countr_zero(m));
+                    for (m &= m - 1; m != 0; m &= m - 1) {
+                        auto const i = std::size_t(std::countr_zero(m));
+                        stack[std::size_t(size++)] = {node.child[i], node.count[i], hits.tnear[i]};
+                    }
+                    current = {node.child[first], node.count[first], hits.tnear[first]};
+                    continue;
+                }
                 // Order the hit children near to far (insertion sort of at most eight).
                 std::array<entry, bvh_width> order;
                 int n = 0;
