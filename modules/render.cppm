@@ -127,6 +127,10 @@ struct light_options {
     vec3<float> sun_direction = normalize(vec3<float>(-0.4f, 1.0f, 0.5f)); // towards the sun
     vec3<float> sun_colour{1.0f, 0.95f, 0.85f};
     float ambient = 0.25f;
+    // An optional point light (path kernel): radiant intensity, falling off with distance².
+    bool point_light = false;
+    vec3<float> point_position{0.0f, 10.0f, 0.0f};
+    vec3<float> point_intensity{50.0f, 50.0f, 50.0f};
 };
 
 // Primary visibility: albedo lit by the sun with hard shadows (shadow rays go through the same
@@ -161,8 +165,9 @@ vec4<float> ao_kernel(Scene const& scene, ray const& r, I isect, pixel_random& r
     return {a, a, a, 1.0f};
 }
 
-// Path tracing: Lambertian surfaces, the sun as a directional light sampled at every bounce
-// (next-event estimation), the sky as environment light; `bounces` indirect bounces.
+// Path tracing: Lambertian surfaces, the sun as a directional light and the optional point light
+// sampled at every bounce (next-event estimation, shadow rays through the same intersector), the
+// sky as environment light; `bounces` indirect bounces.
 template <typename Scene, typename I>
 vec4<float> path_kernel(Scene const& scene, ray r, I isect, pixel_random& rng, int bounces = 3,
                         light_options const& light = {}) {
@@ -177,6 +182,13 @@ vec4<float> path_kernel(Scene const& scene, ray r, I isect, pixel_random& rng, i
         float const cos_sun = dot(s.normal, light.sun_direction);
         if (cos_sun > 0.0f && !scene.any_hit(spawn_ray(s.world_triangle, s.u, s.v, light.sun_direction), isect).hit)
             radiance = radiance + throughput * s.albedo * light.sun_colour * cos_sun;
+        if (light.point_light) {
+            ray const to_light = spawn_ray_to(s.world_triangle, s.u, s.v, light.point_position);
+            float const distance2 = dot(to_light.direction, to_light.direction);
+            float const cos_light = dot(s.normal, to_light.direction) / std::sqrt(distance2);
+            if (cos_light > 0.0f && !scene.any_hit(to_light, isect).hit)
+                radiance = radiance + throughput * s.albedo * light.point_intensity * (cos_light / distance2);
+        }
         throughput = throughput * s.albedo;
         r = spawn_ray(s.world_triangle, s.u, s.v, cosine_direction(s.normal, rng.next(), rng.next()));
     }

@@ -288,9 +288,16 @@ canopy::framebuffer render_kernel(counting_scene const& scene, render_job const&
         return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
             return canopy::ao_kernel(scene, r, isect, rng, 8, 2.0f);
         }, bar);
+    // The path kernel adds a point light above the middle of the scene to the sun and the sky.
+    canopy::light_options light;
+    canopy::aabb const box = scene.scene->bounds();
+    float const extent = canopy::length(canopy::diagonal(box));
+    light.point_light = true;
+    light.point_position = canopy::center(box) + canopy::vec3<float>(0.0f, 0.35f * extent, 0.0f);
+    light.point_intensity = canopy::vec3<float>(1.0f, 0.8f, 0.6f) * (0.05f * extent * extent);
     if (job.kernel == "path")
         return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
-            return canopy::path_kernel(scene, r, isect, rng, 3);
+            return canopy::path_kernel(scene, r, isect, rng, 3, light);
         }, bar);
     return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random&) {
         return canopy::primary_kernel(scene, r, isect);
