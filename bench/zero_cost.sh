@@ -5,6 +5,8 @@
 # the default query. (A box hook of the user's own is called once per box by contract, so it
 # replaces the 8-wide SIMD box test: its cost is reported, not bounded.)
 #   bench/zero_cost.sh [--check] [RAYS] [BINARY]
+# When canopy_bench_zero_cost_embree sits beside BINARY (benchmarks built), Embree's cost of a
+# no-op intersection filter is added for comparison.
 set -euo pipefail
 check=0
 if [ "${1:-}" = "--check" ]; then check=1; shift; fi
@@ -31,6 +33,14 @@ echo "| paper-style forwarding triangle + box hooks (box hook called per box) | 
 echo "| one level (mesh BVH) | ${n[single]} | baseline |"
 echo "| identity instance in a top-level BVH | ${n[instanced]} | $(ratio "${n[instanced]}" "${n[single]}") |"
 echo "| rotated instance in a top-level BVH | ${n[instanced_rt]} | $(ratio "${n[instanced_rt]}" "${n[single]}") |"
+embree_bin="$(dirname "$bin")/canopy_bench_zero_cost_embree"
+if [ -x "$embree_bin" ]; then
+  bin=$embree_bin
+  e_none=$(count none)
+  e_noop=$(count noop_filter)
+  echo "| Embree 3 rtcIntersect1, no filter | $e_none | baseline |"
+  echo "| Embree 3 with a no-op intersection filter | $e_noop | $(ratio "$e_noop" "$e_none") |"
+fi
 if [ "$check" = 1 ]; then
   awk -v d="${n[default]}" -v e="${n[explicit]}" -v f="${n[forwarding_tri]}" 'BEGIN {
     if (e > d * 1.01 || f > d * 1.01) { print "zero_cost: an intersector that adds nothing costs more than 1 %" > "/dev/stderr"; exit 1 }
