@@ -133,6 +133,21 @@ bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) 
                     current = {node.child[first], node.count[first], hits.tnear[first]};
                     continue;
                 }
+                std::uint32_t const first = std::uint32_t(std::countr_zero(hits.mask));
+                std::uint32_t const rest = hits.mask & (hits.mask - 1);
+                entry const one{node.child[first], node.count[first], hits.tnear[first]};
+                if (rest == 0) { // one child hit: no ordering
+                    current = one;
+                    continue;
+                }
+                if ((rest & (rest - 1)) == 0) { // two: the nearer first
+                    auto const second = std::size_t(std::countr_zero(rest));
+                    entry const two{node.child[second], node.count[second], hits.tnear[second]};
+                    bool const two_first = two.tnear < one.tnear;
+                    stack[std::size_t(size++)] = two_first ? one : two;
+                    current = two_first ? two : one;
+                    continue;
+                }
                 // Order the hit children near to far (insertion sort of at most eight).
                 std::array<entry, bvh_width> order;
                 int n = 0;

@@ -68,7 +68,8 @@ struct watertight_shear {
     // Component k of v in the permuted frame (x → kx, y → ky, z → kz).
     vec3<T> permute(vec3<T> const& v) const {
         if constexpr (simd::simd_width_v<T> == 1) {
-            return {v[kx], v[ky], v[kz]};
+            T const c[3] = {v.x, v.y, v.z};
+            return {c[kx], c[ky], c[kz]};
         } else {
             // Per lane: kz = x, y or z; (kx, ky) is the cyclic successor pair, swapped when
             // the direction along kz is negative (keeps the winding).
