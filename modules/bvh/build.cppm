@@ -62,8 +62,17 @@ int bin_index(S x, S lo, S scale, int bins) {
     return int(f);
 }
 
+// Per-task working memory of the binning: 3 · bins bins and one sweep array.
 template <typename S>
-void build_node(build_context<S>& ctx, std::uint32_t node_index, std::size_t begin, std::size_t end, int depth) {
+struct bin_scratch {
+    explicit bin_scratch(int bins) : bins(3 * std::size_t(bins)), right_cost(std::size_t(bins)) {}
+    std::vector<bin<S>> bins;
+    std::vector<double> right_cost;
+};
+
+template <typename S>
+void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t node_index, std::size_t begin,
+                std::size_t end, int depth) {
     auto& nodes = *ctx.nodes;
     auto const& opt = ctx.options;
     std::size_t const count = end - begin;
@@ -85,38 +94,48 @@ void build_node(build_context<S>& ctx, std::uint32_t node_index, std::size_t beg
     };
     if (count == 1 || depth + 1 >= opt.max_depth) return make_leaf();
 
-    // Best binned SAH split over all three axes.
+    // Best binned SAH split over all three axes, binned in one pass over the primitives.
     int const bins = opt.bins;
     double best_cost = std::numeric_limits<double>::infinity();
     int best_axis = -1, best_split = 0;
     double const parent_area = surface_area(bounds);
-    std::vector<bin<S>> b(static_cast<std::size_t>(bins));
-    std::vector<double> right_cost(static_cast<std::size_t>(bins));
+    std::array<S, 3> lo{}, scale{};
+    std::array<bool, 3> usable{};
     for (int axis = 0; axis < 3; ++axis) {
-        S const lo = centroid_bounds.min[axis];
-        S const extent = centroid_bounds.max[axis] - lo;
-        if (!(extent > S(0))) continue;
-        S const scale = S(bins) / extent;
-        std::fill(b.begin(), b.end(), bin<S>{});
-        for (std::size_t i = begin; i < end; ++i) {
-            std::uint32_t const p = ctx.order[i];
-            auto& bb = b[std::size_t(bin_index(ctx.centers[p][axis], lo, scale, bins))];
+        lo[std::size_t(axis)] = centroid_bounds.min[axis];
+        S const extent = centroid_bounds.max[axis] - lo[std::size_t(axis)];
+        usable[std::size_t(axis)] = extent > S(0);
+        scale[std::size_t(axis)] = usable[std::size_t(axis)] ? S(bins) / extent : S(0);
+    }
+    auto& b = scratch.bins;
+    std::fill(b.begin(), b.end(), bin<S>{});
+    for (std::size_t i = begin; i < end; ++i) {
+        std::uint32_t const p = ctx.order[i];
+        for (int axis = 0; axis < 3; ++axis) {
+            if (!usable[std::size_t(axis)]) continue;
+            int const k = bin_index(ctx.centers[p][axis], lo[std::size_t(axis)], scale[std::size_t(axis)], bins);
+            auto& bb = b[std::size_t(axis * bins + k)];
             bb.bounds = extend(bb.bounds, ctx.boxes[p]);
             ++bb.count;
         }
+    }
+    auto& right_cost = scratch.right_cost;
+    for (int axis = 0; axis < 3; ++axis) {
+        if (!usable[std::size_t(axis)]) continue;
+        auto const* ab = b.data() + axis * bins;
         // Sweep from the right, then from the left; split k puts bins [0, k) left.
         basic_aabb<S> acc;
         std::size_t n = 0;
         for (int k = bins - 1; k > 0; --k) {
-            acc = extend(acc, b[std::size_t(k)].bounds);
-            n += b[std::size_t(k)].count;
+            acc = extend(acc, ab[k].bounds);
+            n += ab[k].count;
             right_cost[std::size_t(k)] = n ? double(surface_area(acc)) * double(n) : 0.0;
         }
         acc = basic_aabb<S>{};
         n = 0;
         for (int k = 1; k < bins; ++k) {
-            acc = extend(acc, b[std::size_t(k - 1)].bounds);
-            n += b[std::size_t(k - 1)].count;
+            acc = extend(acc, ab[k - 1].bounds);
+            n += ab[k - 1].count;
             if (n == 0 || n == count) continue;
             double const cost = double(surface_area(acc)) * double(n) + right_cost[std::size_t(k)];
             if (cost < best_cost) {
@@ -137,12 +156,12 @@ void build_node(build_context<S>& ctx, std::uint32_t node_index, std::size_t beg
     // Partition by the chosen bin boundary, or by index when centroids coincide.
     std::size_t mid;
     if (best_axis >= 0) {
-        S const lo = centroid_bounds.min[best_axis];
-        S const scale = S(bins) / (centroid_bounds.max[best_axis] - lo);
+        S const axis_lo = lo[std::size_t(best_axis)];
+        S const axis_scale = scale[std::size_t(best_axis)];
         auto const first = ctx.order.begin() + std::ptrdiff_t(begin);
         auto const last = ctx.order.begin() + std::ptrdiff_t(end);
         auto const split = std::partition(first, last, [&](std::uint32_t p) {
-            return bin_index(ctx.centers[p][best_axis], lo, scale, bins) < best_split;
+            return bin_index(ctx.centers[p][best_axis], axis_lo, axis_scale, bins) < best_split;
         });
         mid = std::size_t(split - ctx.order.begin());
     } else {
@@ -153,11 +172,15 @@ void build_node(build_context<S>& ctx, std::uint32_t node_index, std::size_t beg
     nodes[node_index].index = children;
     nodes[node_index].count = 0;
     if (count >= opt.parallel_threshold) {
-        parallel_invoke([&] { build_node(ctx, children, begin, mid, depth + 1); },
-                        [&] { build_node(ctx, children + 1, mid, end, depth + 1); });
+        parallel_invoke(
+            [&] {
+                bin_scratch<S> own(opt.bins);
+                build_node(ctx, own, children, begin, mid, depth + 1);
+            },
+            [&] { build_node(ctx, scratch, children + 1, mid, end, depth + 1); });
     } else {
-        build_node(ctx, children, begin, mid, depth + 1);
-        build_node(ctx, children + 1, mid, end, depth + 1);
+        build_node(ctx, scratch, children, begin, mid, depth + 1);
+        build_node(ctx, scratch, children + 1, mid, end, depth + 1);
     }
 }
 
@@ -189,7 +212,8 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
 
     result.nodes.resize(2 * n - 1);
     ctx.nodes = &result.nodes;
-    detail::build_node(ctx, 0, 0, n, 0);
+    detail::bin_scratch<S> scratch(options.bins);
+    detail::build_node(ctx, scratch, 0, 0, n, 0);
     result.nodes.resize(ctx.node_count.load());
     result.depth = ctx.depth.load();
     result.wide_nodes = collapse_to_wide(result.nodes);
