@@ -24,91 +24,15 @@
 import canopy.query;
 import canopy.procedural;
 
+#include "stress_support.hpp"
+
 namespace {
 
-using canopy::ray;
-using canopy::triangle;
-using canopy::vec3;
-using dvec3 = vec3<double>;
-using float8 = canopy::simd::float8;
-using packet_ray = canopy::basic_ray<float8>;
-using packet_record = canopy::basic_hit_record<float8>;
-using mesh_bvh = canopy::bvh<triangle>;
-using mesh_instance = canopy::instance<mesh_bvh>;
-using instance_bvh = canopy::bvh<mesh_instance>;
+using namespace stress_support;
 using nested_instance = canopy::instance<instance_bvh>;
 using nested_bvh = canopy::bvh<nested_instance>;
-using record = canopy::hit_record<ray, triangle>;
-using transform = canopy::affine_transform<float>;
 
-constexpr float inf = std::numeric_limits<float>::infinity();
 constexpr std::uint32_t invalid = canopy::invalid_id;
-
-bool full_battery() {
-    char const* value = std::getenv("CANOPY_STRESS_FULL");
-    return value != nullptr && std::string_view(value) == "1";
-}
-
-int sized(int small, int full) { return full_battery() ? full : small; }
-
-std::uint32_t bits(float x) { return std::bit_cast<std::uint32_t>(x); }
-
-struct random_source {
-    std::mt19937 engine;
-    explicit random_source(std::uint32_t seed) : engine(seed) {}
-    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
-    double uniform_double(double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(engine); }
-    int integer(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(engine); }
-    vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
-    vec3<float> direction() {
-        for (;;) {
-            vec3<float> const p = point(-1.0f, 1.0f);
-            float const l2 = canopy::dot(p, p);
-            if (l2 >= 0.01f && l2 <= 1.0f) return p;
-        }
-    }
-};
-
-std::string describe(vec3<float> const& v) {
-    std::ostringstream s;
-    s << std::hexfloat << '(' << v.x << ", " << v.y << ", " << v.z << ')';
-    return s.str();
-}
-
-std::string describe(ray const& r) {
-    std::ostringstream s;
-    s << "ray origin " << describe(r.origin) << " direction " << describe(r.direction) << std::hexfloat << " tmin "
-      << r.tmin << " tmax " << r.tmax;
-    return s.str();
-}
-
-std::string describe(record const& h) {
-    if (!h.hit) return "miss";
-    std::ostringstream s;
-    s << "hit prim " << h.prim_id << " inst " << h.inst_id << " inner " << h.inner_inst_id[0] << std::hexfloat
-      << " t " << h.t << " u " << h.u << " v " << h.v;
-    return s.str();
-}
-
-struct failure_log {
-    std::size_t count = 0;
-    std::string first;
-    void add(std::string const& what) {
-        if (count++ == 0) first = what;
-    }
-};
-
-void require_no_failures(failure_log const& log, std::string_view what) {
-    INFO(what << ": " << log.count << " failure(s); first: " << log.first);
-    REQUIRE(log.count == 0);
-}
-
-bool identical(record const& a, record const& b) {
-    if (a.hit != b.hit) return false;
-    if (!a.hit) return true;
-    return bits(a.t) == bits(b.t) && bits(a.u) == bits(b.u) && bits(a.v) == bits(b.v) && a.prim_id == b.prim_id &&
-           a.geom_id == b.geom_id && a.inst_id == b.inst_id && a.inner_inst_id == b.inner_inst_id;
-}
 
 template <typename Structure>
 record closest(ray const& r, Structure const& s) {
