@@ -67,9 +67,7 @@ int main(int argc, char** argv) try {
     scene.meshes.push_back(std::move(coarse));
 
     // The ground once, then a 10 × 10 grid of squashed, tilted and turned spheres.
-    scene.instanced = true;
-    scene.instance_mesh.push_back(0);
-    scene.instance_transforms.push_back(canopy::affine_transform<float>::identity());
+    scene.place(0, canopy::affine_transform<float>::identity());
     std::mt19937 rng(5);
     std::uniform_real_distribution<float> unit(0.0f, 1.0f);
     float const pi = std::numbers::pi_v<float>;
@@ -78,22 +76,21 @@ int main(int argc, char** argv) try {
             float const size = 0.3f + 0.4f * unit(rng);
             vec3<float> const scale(size, size * (0.5f + unit(rng)), size * (0.6f + 0.6f * unit(rng)));
             vec3<float> const at(2.0f * float(i) - 9.0f, scale.y, 2.0f * float(j) - 9.0f);
-            scene.instance_mesh.push_back((i + j) % 2 == 0 ? 1 : 2);
-            scene.instance_transforms.push_back(placement(at, scale, 0.4f * (unit(rng) - 0.5f), 2.0f * pi * unit(rng)));
+            scene.place((i + j) % 2 == 0 ? 1 : 2, placement(at, scale, 0.4f * (unit(rng) - 0.5f), 2.0f * pi * unit(rng)));
         }
     scene.build();
 
     // What instancing saves: the triangles stored against the triangles placed in the world.
     std::size_t placed = 0;
-    for (std::uint32_t mesh : scene.instance_mesh) placed += scene.meshes[mesh].triangles.size();
+    for (auto const& p : scene.top_meshes) placed += scene.meshes[p.index].triangles.size();
     std::size_t const stored =
         scene.meshes[0].triangles.size() + scene.meshes[1].triangles.size() + scene.meshes[2].triangles.size();
-    std::printf("%zu instances of %zu meshes: %zu triangles stored, %zu placed in the world\n", scene.instances.size(),
+    std::printf("%zu instances of %zu meshes: %zu triangles stored, %zu placed in the world\n", scene.top_mesh_instances.size(),
                 scene.meshes.size(), stored, placed);
     print_stats("ground BVH", canopy::compute_stats(scene.meshes[0].accel));
     print_stats("fine sphere BVH", canopy::compute_stats(scene.meshes[1].accel));
     print_stats("coarse sphere BVH", canopy::compute_stats(scene.meshes[2].accel));
-    print_stats("top-level BVH", canopy::compute_stats(scene.top));
+    print_stats("top-level BVH", canopy::compute_stats(scene.top1));
 
     // One image, primary visibility with sun shadows.
     auto const camera = canopy::pinhole_camera::look_at({0.0f, 9.0f, 17.0f}, {0.0f, 0.0f, 0.0f}, {0.0f, 1.0f, 0.0f},

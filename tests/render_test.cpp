@@ -63,10 +63,8 @@ canopy::compiled_scene make_layered_scene(front_kind front) {
                             canopy::sampler{canopy::filter_mode::nearest, canopy::address_mode::clamp});
     s.meshes.push_back(make_quad(back_half, back_z, 0));
     if (front != front_kind::none) s.meshes.push_back(make_quad(front_half, front_z, 1));
-    s.instanced = true;
     for (std::size_t k = 0; k < s.meshes.size(); ++k) {
-        s.instance_mesh.push_back(std::uint32_t(k));
-        s.instance_transforms.push_back(canopy::affine_transform<float>::identity());
+        s.place(std::uint32_t(k), canopy::affine_transform<float>::identity());
     }
     s.build();
     return s;

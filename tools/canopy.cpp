@@ -390,9 +390,7 @@ canopy::compiled_scene compile_bench_scene(std::filesystem::path const& path) {
     if (path.extension() == ".inst") {
         auto inst = canopy::read_bench_inst(path);
         mesh.triangles = std::move(inst.mesh.triangles);
-        scene.instanced = true;
-        scene.instance_transforms = inst.instances;
-        scene.instance_mesh.assign(inst.instances.size(), 0);
+        for (auto const& xf : inst.instances) scene.place(0, xf);
     } else if (path.extension() == ".obj") {
         mesh.triangles = canopy::read_bench_obj(path).triangles;
     } else {
@@ -461,7 +459,7 @@ int run_render(std::span<char*> args) {
         base.camera = canopy::pinhole_camera::look_at(forest.camera_eye, forest.camera_target, {0, 1, 0},
                                                       forest.camera_fovy, aspect);
         fmt::print(stderr, "demo scene: {} instances of {} meshes, built in {:.1f} ms\n",
-                   forest.scene.instances.size(), forest.scene.meshes.size(), build_seconds * 1e3);
+                   forest.scene.top_mesh_instances.size(), forest.scene.meshes.size(), build_seconds * 1e3);
         struct figure {
             char const* file;
             char const* kernel;

@@ -61,15 +61,11 @@ inline billboard_forest make_billboard_forest(texture2d<vec4<float>> tree_textur
     s.meshes.push_back(std::move(ground));
     s.meshes.push_back(std::move(ball));
     s.meshes.push_back(std::move(quad));
-
-    s.instanced = true;
-    s.instance_mesh.push_back(0);
-    s.instance_transforms.push_back(affine_transform<float>::identity());
+    s.place(0, affine_transform<float>::identity());
     for (int k = 0; k < options.spheres; ++k) {
         float const r = uniform(0.6f, 1.6f);
         std::array<float, 12> const rows{r, 0, 0, uniform(-9.0f, 9.0f), 0, r, 0, r, 0, 0, r, uniform(-14.0f, 2.0f)};
-        s.instance_mesh.push_back(1);
-        s.instance_transforms.push_back(affine_transform<float>::from_rows(rows));
+        s.place(1, affine_transform<float>::from_rows(rows));
     }
     for (int k = 0; k < options.billboards; ++k) {
         float const x = uniform(-16.0f, 16.0f), z = uniform(-18.0f, 9.0f);
@@ -78,8 +74,7 @@ inline billboard_forest make_billboard_forest(texture2d<vec4<float>> tree_textur
         float const yaw = std::atan2(forest.camera_eye.x - x, forest.camera_eye.z - z);
         float const cy = std::cos(yaw), sy = std::sin(yaw);
         std::array<float, 12> const rows{cy * width, 0, sy, x, 0, height, 0, 0, -sy * width, 0, cy, z};
-        s.instance_mesh.push_back(2);
-        s.instance_transforms.push_back(affine_transform<float>::from_rows(rows));
+        s.place(2, affine_transform<float>::from_rows(rows));
     }
     s.build();
     return forest;

@@ -1,0 +1,35 @@
+// canopy.plugins — implementation: the list of built-in plugins.
+module;
+#include <cstdlib>
+#include <exception>
+#include <string>
+module canopy.plugins;
+import canopy.plugins.oiio;
+
+namespace canopy {
+
+void register_builtin_plugins(registry& r) {
+    register_oiio_plugin(r);
+}
+
+registry& builtin_registry() {
+    struct holder {
+        registry r;
+        std::exception_ptr failure;
+        holder() {
+            register_builtin_plugins(r);
+            if (char const* path = std::getenv("CANOPY_PLUGIN_PATH")) {
+                try {
+                    r.load_plugin_path(path);
+                } catch (...) {
+                    failure = std::current_exception();
+                }
+            }
+        }
+    };
+    static holder h;
+    if (h.failure) std::rethrow_exception(h.failure);
+    return h.r;
+}
+
+} // namespace canopy

@@ -1,0 +1,282 @@
+// canopy.scene:compiled — what a scene compiles into, ready for queries and rendering.
+//
+// Meshes are built into BVHs once each. Placements put them in the world in up to two instance
+// levels, chosen by compile() (canopy.scene:compile) or set by hand before build():
+//   levels 0  one mesh traced directly, no top level (a single untransformed mesh)
+//   levels 1  a top-level BVH over instances of meshes (top_meshes)
+//   levels 2  a top-level BVH over instances of groups (top_groups); each group is a BVH over
+//             instances of meshes (a shared subtree of the scene graph, built once)
+// Ids in hit records: geom_id = mesh index, prim_id = triangle index in that mesh; inst_id = the
+// index of the top-level placement (invalid_id at level 0); at level 2 inner_inst_id[0] = the
+// index of the placement inside its group.
+//
+// compiled_scene provides what canopy.render's kernels need (closest_hit, any_hit, surface,
+// background) and the texture coordinates at a hit (uv), which alpha-mask intersectors use.
+module;
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+export module canopy.scene:compiled;
+export import canopy.render;
+export import canopy.texture;
+import :graph;
+
+export namespace canopy {
+
+struct material {
+    vec3<float> albedo{0.7f, 0.7f, 0.7f};
+    int texture = -1;           // index into compiled_scene::textures, or -1
+    bool alpha_mask = false;    // the texture's alpha (or a procedural rule) cuts the surface
+    float alpha_cutoff = 0.01f; // texels with alpha below this are holes
+};
+
+struct compiled_mesh {
+    std::string name;
+    std::vector<triangle> triangles;                // in input order: triangles[prim_id]
+    std::vector<std::array<vec2<float>, 3>> uvs;    // per triangle, or empty
+    int material = 0;
+    bvh<triangle> accel;
+};
+
+// What compile() did (all zero for scenes assembled by hand). decisions: one line per rule
+// that applied, for `canopy info`.
+struct compile_statistics {
+    std::size_t nodes = 0;
+    std::size_t custom_nodes_expanded = 0;
+    std::size_t meshes_in_scene = 0;
+    std::size_t meshes_built = 0;
+    std::size_t meshes_unreferenced = 0;  // not built
+    std::size_t meshes_empty = 0;         // placed but without triangles: dropped
+    std::size_t subtrees_empty = 0;       // instances of subtrees without meshes: dropped
+    std::size_t triangles_stored = 0;     // in built meshes
+    std::size_t triangles_placed = 0;     // counted once per placement
+    std::size_t placements = 0;           // mesh placements in the world
+    std::size_t identity_placements = 0;  // placements whose transform is not applied
+    std::size_t identity_transform_nodes = 0;
+    std::size_t groups = 0;               // level-2 groups (shared subtrees with several meshes)
+    std::size_t group_instances = 0;
+    std::size_t flattened_placements = 0; // from nesting deeper than two levels
+    std::size_t materials = 0;
+    std::size_t masked_materials_used = 0;
+    std::size_t images_used = 0;
+    std::size_t images_unused = 0;
+    std::size_t cameras = 0;
+    std::size_t lights = 0;
+    int levels = 0;
+    bool alpha_mask_needed = false;
+    double build_seconds = 0.0;
+    std::vector<std::string> decisions;
+};
+
+// A mesh or group put in place: index into compiled_scene::meshes or ::groups, object→world.
+struct placement {
+    std::uint32_t index = 0;
+    affine_transform<float> transform = affine_transform<float>::identity();
+};
+
+using mesh_instance = instance<bvh<triangle>>;
+using group_bvh = bvh<mesh_instance>;
+using group_instance = instance<group_bvh>;
+
+// A shared subtree: meshes placed relative to the subtree's own frame, under one BVH.
+struct compiled_group {
+    std::string name;
+    std::vector<placement> placements;    // set before build()
+    std::vector<mesh_instance> instances; // instances[k] places placements[k]
+    group_bvh accel;
+};
+
+struct compiled_scene {
+    // Instances point into meshes and groups: a compiled scene moves but does not copy.
+    compiled_scene() = default;
+    compiled_scene(compiled_scene const&) = delete;
+    compiled_scene& operator=(compiled_scene const&) = delete;
+    compiled_scene(compiled_scene&&) = default;
+    compiled_scene& operator=(compiled_scene&&) = default;
+
+    std::vector<compiled_mesh> meshes;
+    std::vector<material> materials{material{}};
+    std::vector<texture2d<vec4<float>>> textures;
+    std::vector<compiled_group> groups;
+
+    int levels = 0;                   // see the file comment
+    std::vector<placement> top_meshes; // levels 1
+    std::vector<placement> top_groups; // levels 2
+
+    std::vector<mesh_instance> top_mesh_instances;   // built from top_meshes
+    std::vector<group_instance> top_group_instances; // built from top_groups
+    bvh<mesh_instance> top1;
+    bvh<group_instance> top2;
+
+    // World-space camera and lights of the scene, when it has them.
+    std::optional<camera_data> camera;
+    std::vector<light_data> lights;
+
+    compile_statistics statistics;
+
+    vec3<float> sky_zenith{0.35f, 0.55f, 0.9f};
+    vec3<float> sky_horizon{0.85f, 0.9f, 0.95f};
+
+    // Places mesh `m` at the top level (levels becomes at least 1).
+    void place(std::uint32_t m, affine_transform<float> const& xf) {
+        levels = std::max(levels, 1);
+        top_meshes.push_back({m, xf});
+    }
+
+    // Builds every mesh BVH, then the groups, then the top level. Meshes and groups must not be
+    // added afterwards: instances point at their BVHs.
+    void build(bvh_build_options const& options = {}) {
+        if (levels < 0 || levels > 2) throw std::invalid_argument("compiled_scene: levels must be 0, 1 or 2");
+        if (levels == 0 && meshes.size() != 1)
+            throw std::invalid_argument("compiled_scene: level 0 needs exactly one mesh");
+        for (std::size_t g = 0; g < meshes.size(); ++g) {
+            for (auto& t : meshes[g].triangles) t.geom_id = std::uint32_t(g);
+            meshes[g].accel = build_binned_sah(meshes[g].triangles, options);
+        }
+        auto const mesh_instances = [&](std::vector<placement> const& ps) {
+            std::vector<mesh_instance> out;
+            out.reserve(ps.size());
+            for (std::size_t k = 0; k < ps.size(); ++k)
+                out.emplace_back(meshes.at(ps[k].index).accel, ps[k].transform, std::uint32_t(k));
+            return out;
+        };
+        for (auto& g : groups) {
+            g.instances = mesh_instances(g.placements);
+            g.accel = build_binned_sah(g.instances, options);
+        }
+        top_mesh_instances.clear();
+        top_group_instances.clear();
+        if (levels == 1) {
+            top_mesh_instances = mesh_instances(top_meshes);
+            top1 = build_binned_sah(top_mesh_instances, options);
+        } else if (levels == 2) {
+            for (std::size_t k = 0; k < top_groups.size(); ++k)
+                top_group_instances.emplace_back(groups.at(top_groups[k].index).accel, top_groups[k].transform,
+                                                 std::uint32_t(k));
+            top2 = build_binned_sah(top_group_instances, options);
+        }
+    }
+
+    aabb bounds() const {
+        if (levels == 2) return top2.bounds();
+        if (levels == 1) return top1.bounds();
+        return meshes.empty() ? aabb{} : meshes[0].accel.bounds();
+    }
+
+    template <typename I>
+    basic_hit_record<float> closest_hit(ray const& r, I& isect) const {
+        if (levels == 2) return canopy::closest_hit(r, &top2, &top2 + 1, isect);
+        if (levels == 1) return canopy::closest_hit(r, &top1, &top1 + 1, isect);
+        return canopy::closest_hit(r, &meshes[0].accel, &meshes[0].accel + 1, isect);
+    }
+
+    template <typename I>
+    basic_hit_record<float> any_hit(ray const& r, I& isect) const {
+        if (levels == 2) return canopy::any_hit(r, &top2, &top2 + 1, isect);
+        if (levels == 1) return canopy::any_hit(r, &top1, &top1 + 1, isect);
+        return canopy::any_hit(r, &meshes[0].accel, &meshes[0].accel + 1, isect);
+    }
+
+    // Object→world transform of the mesh a hit lies on (identity at level 0).
+    affine_transform<float> object_to_world(basic_hit_record<float> const& hr) const {
+        if (levels == 1 && hr.inst_id != invalid_id) return top_mesh_instances[hr.inst_id].object_to_world;
+        if (levels == 2 && hr.inst_id != invalid_id) {
+            group_instance const& outer = top_group_instances[hr.inst_id];
+            mesh_instance const& inner = groups[top_groups[hr.inst_id].index].instances[hr.inner_inst_id[0]];
+            if (inner.identity) return outer.object_to_world;
+            if (outer.identity) return inner.object_to_world;
+            return outer.object_to_world * inner.object_to_world;
+        }
+        return affine_transform<float>::identity();
+    }
+
+    // Texture coordinates at a hit (hooks may call this: it needs only geom_id, prim_id, u, v).
+    vec2<float> uv(basic_hit_record<float> const& hr) const {
+        auto const& mesh = meshes[hr.geom_id];
+        if (mesh.uvs.empty()) return {hr.u, hr.v};
+        auto const& t = mesh.uvs[hr.prim_id];
+        return lerp(t[0], t[1], t[2], hr.u, hr.v);
+    }
+
+    material const& material_of(basic_hit_record<float> const& hr) const {
+        return materials[std::size_t(meshes[hr.geom_id].material)];
+    }
+
+    surface_sample surface(basic_hit_record<float> const& hr, ray const& r) const {
+        surface_sample s;
+        triangle tri = meshes[hr.geom_id].triangles[hr.prim_id];
+        if (levels > 0) {
+            auto const m = object_to_world(hr);
+            tri.v0 = m.transform_point(tri.v0);
+            tri.v1 = m.transform_point(tri.v1);
+            tri.v2 = m.transform_point(tri.v2);
+        }
+        s.world_triangle = tri;
+        s.u = hr.u;
+        s.v = hr.v;
+        vec3<float> n = normalize(geometric_normal(tri));
+        if (dot(n, r.direction) > 0.0f) n = -n;
+        s.normal = n;
+        material const& mat = material_of(hr);
+        s.albedo = mat.albedo;
+        if (mat.texture >= 0) {
+            vec4<float> const texel = tex2D(textures[std::size_t(mat.texture)], uv(hr));
+            s.albedo = s.albedo * vec3<float>(texel.x, texel.y, texel.z);
+        }
+        return s;
+    }
+
+    vec3<float> background(ray const& r) const {
+        float const up = r.direction.y / length(r.direction);
+        float const t = std::sqrt(std::clamp(up, 0.0f, 1.0f));
+        return lerp(sky_horizon, sky_zenith, t);
+    }
+};
+
+// The paper's texture alpha mask: a candidate on a masked material is kept only where the
+// texture's alpha at the hit's texture coordinates reaches the cutoff.
+struct texture_alpha_mask : basic_intersector<texture_alpha_mask> {
+    using basic_intersector<texture_alpha_mask>::operator();
+
+    template <typename Ray>
+    auto operator()(Ray const& ray, triangle const& tri) {
+        auto hr = intersect(ray, tri);
+        if (hr.hit) {
+            material const& mat = scene->material_of(hr);
+            if (mat.alpha_mask && mat.texture >= 0)
+                hr.hit &= tex2D(scene->textures[std::size_t(mat.texture)], scene->uv(hr)).w >= mat.alpha_cutoff;
+        }
+        return hr;
+    }
+
+    compiled_scene const* scene = nullptr;
+};
+
+// A procedural alpha mask on masked materials: concentric rings around the centre of texture
+// space, cut off outside the unit disc.
+struct procedural_alpha_mask : basic_intersector<procedural_alpha_mask> {
+    using basic_intersector<procedural_alpha_mask>::operator();
+
+    template <typename Ray>
+    auto operator()(Ray const& ray, triangle const& tri) {
+        auto hr = intersect(ray, tri);
+        if (hr.hit && scene->material_of(hr).alpha_mask) hr.hit &= keeps(scene->uv(hr));
+        return hr;
+    }
+
+    // The rule: with d = 2·|uv − (0.5, 0.5)|, keep where d < 1 and frac(5d) < 0.6.
+    static bool keeps(vec2<float> uv) {
+        float const d = 2.0f * length(uv - vec2<float>(0.5f, 0.5f));
+        float const ring = 5.0f * d - std::floor(5.0f * d);
+        return d < 1.0f && ring < 0.6f;
+    }
+
+    compiled_scene const* scene = nullptr;
+};
+
+} // namespace canopy

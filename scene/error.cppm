@@ -1,0 +1,41 @@
+// canopy.scene:error — the one exception type for bad scene input.
+//
+// Every loader, generator and compile step reports bad input by throwing scene_error. Its message
+// names the file, the place in it (line, element or node, where known) and the problem, as
+//   "forest.json: node 'trees': instance target 'oak' does not exist"
+//   "bunny.obj:1207: face index 40112 is out of range (35947 vertices)"
+// so a user can find the fault without a debugger. Nothing is half-loaded: a loader that throws
+// leaves the scene it was loading into as it was (see scene::transaction).
+module;
+#include <stdexcept>
+#include <string>
+export module canopy.scene:error;
+
+export namespace canopy {
+
+class scene_error : public std::runtime_error {
+public:
+    // file: the file at fault (may be empty for scenes built in code); where: "12" (a line),
+    // "node 'x'", "material 3", ... (may be empty); problem: what is wrong, in plain words.
+    scene_error(std::string file, std::string where, std::string const& problem)
+        : std::runtime_error(compose(file, where, problem)), file_(std::move(file)), where_(std::move(where)),
+          problem_(problem) {}
+
+    std::string const& file() const noexcept { return file_; }
+    std::string const& where() const noexcept { return where_; }
+    std::string const& problem() const noexcept { return problem_; }
+
+private:
+    static std::string compose(std::string const& file, std::string const& where, std::string const& problem) {
+        std::string m = file.empty() ? std::string("scene") : file;
+        if (!where.empty()) {
+            bool const line = where.find_first_not_of("0123456789") == std::string::npos;
+            m += line ? ":" + where : ": " + where;
+        }
+        return m + ": " + problem;
+    }
+
+    std::string file_, where_, problem_;
+};
+
+} // namespace canopy

@@ -1,0 +1,115 @@
+// canopy.scene:registry — where plugins register what they add to the scene graph.
+//
+// A plugin adds any of:
+//   file loaders     by extension (".ply"): load a file into a scene under a parent node; several
+//                    plugins may load one extension: the last registered is the default, the
+//                    others are chosen by plugin name (load(s, file, parent, "openmesh"))
+//   image loaders    by extension (".png"): read a texture into an image_data
+//   generators       by name ("icosphere"): build geometry from parameters, deterministic in them
+//   node types       by name: a custom node that compile() expands into standard nodes
+// Built-in plugins are registered by canopy.plugins (builtin_registry()). Plugins compiled as
+// shared libraries are loaded at run time by load_plugin(file) or load_plugin_path(list) (the
+// list in CANOPY_PLUGIN_PATH is loaded by builtin_registry()): see the entry point below.
+//
+// The C entry point of a shared-library plugin (the only symbol the loader looks up):
+//
+//   extern "C" int canopy_plugin_register(unsigned abi_version, void* registry);
+//
+// abi_version is canopy::plugin_abi_version of the loading program; a plugin built against
+// another version returns non-zero without touching the registry. registry points to the
+// canopy::registry to register into. The function returns 0 on success; a non-zero result, or
+// an exception it lets escape, is reported as a scene_error naming the file. A loaded library
+// stays loaded for the life of the process (its functions are held by the registry).
+//
+// Loading is all-or-nothing: when a loader or generator throws, the scene is rolled back to what
+// it was before the call.
+module;
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+export module canopy.scene:registry;
+import :error;
+import :graph;
+
+export namespace canopy {
+
+// Version of the plugin interface (registry and scene types); raised on every incompatible change.
+inline constexpr unsigned plugin_abi_version = 1;
+
+class registry;
+
+// Loads `file` into `s` under `parent`; returns the node it made (usually a group named after the
+// file). Throws scene_error on bad input. `r` is the registry the load goes through (for
+// textures and files the file refers to).
+using file_loader = std::function<node_id(scene& s, std::filesystem::path const& file, node_id parent, registry const& r)>;
+using image_loader = std::function<image_data(std::filesystem::path const& file)>;
+// Builds geometry under `parent` from `params`; returns the node it made.
+using generator = std::function<node_id(scene& s, node_id parent, parameters const& params)>;
+
+struct registered {
+    std::string name;        // extension (with dot, lower case) or generator / node type name
+    std::string plugin;      // the plugin that registered it
+    std::string description; // one line for `canopy info` and --help
+};
+
+class registry {
+public:
+    void add_loader(std::string extension, std::string plugin, std::string description, file_loader f);
+    void add_image_loader(std::string extension, std::string plugin, image_loader f);
+    void add_generator(std::string name, std::string plugin, std::string description, generator f);
+    // A custom node type: `expand` builds the node's content under the node itself (parent = the
+    // custom node), from the node's parameters.
+    void add_node_type(std::string name, std::string plugin, std::string description, generator expand);
+
+    // Loads a file by its extension (case-insensitive) under parent (default: the root), with
+    // the extension's default loader or the one `plugin` registered. Errors: missing file,
+    // unknown extension (the message lists the known ones), no such plugin for the extension,
+    // and whatever the loader reports. On error the scene is unchanged; errors that do not name
+    // a file are given this one's name.
+    node_id load(scene& s, std::filesystem::path const& file, node_id parent = 0, std::string_view plugin = {}) const;
+    image_data load_image(std::filesystem::path const& file) const;
+    node_id generate(scene& s, std::string const& name, parameters const& params, node_id parent = 0) const;
+    // Expands every custom node of the scene (also those made by expansions), in place.
+    void expand_custom_nodes(scene& s) const;
+
+    bool has_loader(std::string_view extension) const;
+    bool has_generator(std::string_view name) const { return generators_.contains(std::string(name)); }
+    bool has_node_type(std::string_view name) const { return node_types_.contains(std::string(name)); }
+    std::vector<registered> loaders() const;
+    std::vector<registered> image_loaders() const;
+    std::vector<registered> generators() const;
+    std::vector<registered> node_types() const;
+    std::vector<std::string> const& plugins() const { return plugins_; } // loaded shared libraries
+
+    // Loads one shared-library plugin (see the entry point above). Loading the same file twice
+    // is a no-op. Throws scene_error naming the file on failure.
+    void load_plugin(std::filesystem::path const& file);
+    // Loads plugins from a list of files and folders separated by ':' (a folder: every *.so in
+    // it, in name order). Empty entries are skipped; a missing entry is an error.
+    void load_plugin_path(std::string_view list);
+
+private:
+    template <typename F>
+    struct entry {
+        registered info;
+        F function;
+    };
+    std::map<std::string, std::vector<entry<file_loader>>> loaders_; // last = default
+    std::map<std::string, entry<image_loader>> image_loaders_;
+    std::map<std::string, entry<generator>> generators_;
+    std::map<std::string, entry<generator>> node_types_;
+    std::vector<std::string> plugins_;
+};
+
+// Lower-case extension with its dot ("Model.PLY" → ".ply").
+std::string extension_of(std::filesystem::path const& file);
+
+// A new scene holding one file (under a group named after it).
+scene load_scene(std::filesystem::path const& file, registry const& r);
+
+} // namespace canopy

@@ -1,0 +1,14 @@
+// canopy.scene — the scene graph, the plugin registry, and scenes compiled into BVHs.
+//
+//   canopy::scene s;                                  // :graph    nodes, meshes, materials, images
+//   registry.load(s, "forest.json");                  // :registry loaders, generators, node types, plugins
+//   canopy::compiled_scene c = canopy::compile(s);    // :compile  BVHs and instances, skip rules
+//   c.closest_hit(ray, isect);                        // :compiled what queries and kernels trace
+//
+// Built-in loaders and generators live in plugins/ (module canopy.plugins).
+export module canopy.scene;
+export import :error;
+export import :graph;
+export import :registry;
+export import :compiled;
+export import :compile;
