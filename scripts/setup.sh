@@ -17,6 +17,7 @@ apt_packages=(
   libembree-dev
   glmark2-data libcgal-demo
   valgrind libgmp-dev python3-matplotlib
+  libopenmesh-dev libtinygltf-dev nlohmann-json3-dev assimp-testmodels
 )
 # The machine image ships Node.js with its own npm; Debian's npm would conflict with it.
 command -v npm >/dev/null 2>&1 || apt_packages+=(npm)
