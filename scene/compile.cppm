@@ -42,7 +42,7 @@ export namespace canopy {
 struct compile_options {
     registry const* plugins = nullptr; // expands custom nodes (required when the scene has any)
     bvh_build_options bvh{};
-    std::string name;                  // how errors name the scene (usually its file)
+    std::string name{};                // how errors name the scene (usually its file)
 };
 
 

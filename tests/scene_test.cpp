@@ -1,0 +1,493 @@
+// Tests of canopy.scene: the scene graph's input checks, the registry's loading rules, and
+// compile()'s skip rules — each rule observable in the statistics and in the result. Hits of
+// compiled scenes are checked against a brute-force loop over every placed triangle in world
+// space, with the placements' transforms composed by hand in double precision.
+#include <catch2/catch.hpp>
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+import canopy.scene;
+import canopy.procedural;
+
+namespace {
+
+using canopy::node_id;
+using canopy::vec3;
+using xf = canopy::affine_transform<float>;
+
+// ---- building blocks -----------------------------------------------------------------------
+
+canopy::mesh_data mesh_from(std::vector<canopy::triangle> const& tris, std::string name) {
+    canopy::mesh_data m;
+    m.name = std::move(name);
+    for (auto const& t : tris) {
+        auto const base = std::uint32_t(m.positions.size());
+        m.positions.insert(m.positions.end(), {t.v0, t.v1, t.v2});
+        m.triangles.push_back({base, base + 1, base + 2});
+    }
+    return m;
+}
+
+canopy::mesh_data sphere(std::string name, int subdivisions = 1) {
+    return mesh_from(canopy::make_icosphere(subdivisions), std::move(name));
+}
+
+xf translate(float x, float y, float z) { return xf::from_rows({1, 0, 0, x, 0, 1, 0, y, 0, 0, 1, z}); }
+xf scale_rotate_z(float s, float degrees, vec3<float> t) {
+    double const a = double(degrees) * 3.14159265358979323846 / 180.0;
+    float const c = float(std::cos(a)) * s, n = float(std::sin(a)) * s;
+    return xf::from_rows({c, -n, 0, t.x, n, c, 0, t.y, 0, 0, s, t.z});
+}
+
+std::string message_of(auto&& f) {
+    try {
+        f();
+    } catch (canopy::scene_error const& e) {
+        return e.what();
+    }
+    return "(no scene_error)";
+}
+
+// ---- the reference: every placed triangle in world space, in double --------------------------
+
+struct world_triangle {
+    std::array<vec3<double>, 3> v;
+    std::uint32_t geom, prim;
+    std::uint32_t inst, inner; // placement ids as the compiled scene reports them
+};
+
+using xf64 = canopy::affine_transform<double>;
+xf64 widen(xf const& a) {
+    return {{vec3<double>(a.linear.col0), vec3<double>(a.linear.col1), vec3<double>(a.linear.col2)},
+            vec3<double>(a.translation)};
+}
+
+// The compiled scene's placements, flattened: this reads only the placement lists (what compile
+// decided), not the BVHs or instances that trace them.
+std::vector<world_triangle> world_of(canopy::compiled_scene const& c) {
+    std::vector<world_triangle> out;
+    auto const emit = [&](std::uint32_t mesh, xf64 const& m, std::uint32_t inst, std::uint32_t inner) {
+        auto const& tris = c.meshes[mesh].triangles;
+        for (std::uint32_t p = 0; p < tris.size(); ++p) {
+            world_triangle w{{m.transform_point(vec3<double>(tris[p].v0)), m.transform_point(vec3<double>(tris[p].v1)),
+                              m.transform_point(vec3<double>(tris[p].v2))},
+                             mesh, p, inst, inner};
+            out.push_back(w);
+        }
+    };
+    if (c.levels == 0) emit(0, xf64::identity(), canopy::invalid_id, canopy::invalid_id);
+    for (std::uint32_t k = 0; k < c.top_meshes.size() && c.levels == 1; ++k)
+        emit(c.top_meshes[k].index, widen(c.top_meshes[k].transform), k, canopy::invalid_id);
+    for (std::uint32_t k = 0; k < c.top_groups.size() && c.levels == 2; ++k) {
+        auto const& g = c.groups[c.top_groups[k].index];
+        for (std::uint32_t j = 0; j < g.placements.size(); ++j)
+            emit(g.placements[j].index, widen(c.top_groups[k].transform) * widen(g.placements[j].transform), k, j);
+    }
+    return out;
+}
+
+// Möller–Trumbore in double; rays in these tests aim at triangle interiors, far from edges.
+std::optional<double> hit_double(canopy::ray const& r, world_triangle const& w) {
+    vec3<double> const o(r.origin), d(r.direction);
+    vec3<double> const e1 = w.v[1] - w.v[0], e2 = w.v[2] - w.v[0];
+    vec3<double> const p = cross(d, e2);
+    double const det = dot(e1, p);
+    if (std::abs(det) < 1e-300) return std::nullopt;
+    vec3<double> const s = o - w.v[0];
+    double const u = dot(s, p) / det;
+    vec3<double> const q = cross(s, e1);
+    double const v = dot(d, q) / det;
+    double const t = dot(e2, q) / det;
+    if (u < 0 || v < 0 || u + v > 1 || t < double(r.tmin) || t > double(r.tmax)) return std::nullopt;
+    return t;
+}
+
+// Rays from outside the scene at the centroids of random world triangles: the compiled scene's
+// closest hit must be the brute-force closest (same mesh, triangle and placement ids, t close).
+void check_against_brute_force(canopy::compiled_scene const& c, int rays, std::uint32_t seed) {
+    auto const world = world_of(c);
+    REQUIRE(!world.empty());
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    auto const box = c.bounds();
+    float const extent = length(diagonal(box));
+    int hits = 0;
+    for (int i = 0; i < rays; ++i) {
+        auto const& target = world[rng() % world.size()];
+        vec3<double> const centroid = (target.v[0] + target.v[1] + target.v[2]) / 3.0;
+        vec3<float> const origin = center(box) + normalize(vec3<float>(unit(rng), unit(rng), unit(rng))) * extent;
+        canopy::ray r{origin, 0.0f, vec3<float>(centroid) - origin, 2.0f};
+        std::optional<double> best;
+        world_triangle const* best_w = nullptr;
+        for (auto const& w : world)
+            if (auto t = hit_double(r, w); t && (!best || *t < *best)) best = t, best_w = &w;
+        canopy::default_intersector isect;
+        auto const hr = c.closest_hit(r, isect);
+        INFO("ray " << i);
+        REQUIRE(hr.hit == best.has_value());
+        if (!best) continue;
+        ++hits;
+        CHECK(hr.geom_id == best_w->geom);
+        CHECK(hr.prim_id == best_w->prim);
+        CHECK(hr.inst_id == best_w->inst);
+        if (c.levels == 2) CHECK(hr.inner_inst_id[0] == best_w->inner);
+        // The hit point's distance from the plane of the triangle: float rounding of the rays
+        // at each level, a few ulps of the scene's extent (t itself varies more on grazing rays).
+        vec3<double> const n = normalize(cross(best_w->v[1] - best_w->v[0], best_w->v[2] - best_w->v[0]));
+        double const off_plane = std::abs(double(hr.t) - *best) * std::abs(dot(n, vec3<double>(r.direction)));
+        CHECK(off_plane <= 1e-5 * double(extent));
+        // surface() places the triangle with the same composed transform.
+        auto const s = c.surface(hr, r);
+        for (int k = 0; k < 3; ++k) {
+            vec3<float> const got = k == 0 ? s.world_triangle.v0 : k == 1 ? s.world_triangle.v1 : s.world_triangle.v2;
+            CHECK(length(vec3<double>(got) - best_w->v[std::size_t(k)]) <= 1e-5 * (1.0 + length(best_w->v[std::size_t(k)])));
+        }
+    }
+    CHECK(hits > rays / 2);
+}
+
+bool decided(canopy::compiled_scene const& c, std::string const& words) {
+    for (auto const& d : c.statistics.decisions)
+        if (d.find(words) != std::string::npos) return true;
+    return false;
+}
+
+} // namespace
+
+// ---- the graph refuses bad data where it enters ---------------------------------------------
+
+TEST_CASE("add_mesh refuses non-finite vertices, out-of-range indices and mismatched attributes") {
+    canopy::scene s;
+    auto m = sphere("ball");
+    m.source = "ball.ply";
+    auto bad = m;
+    bad.positions[7].y = std::nanf("");
+    CHECK(message_of([&] { s.add_mesh(bad); }) == "ball.ply: mesh 'ball': vertex 7 has a coordinate that is not finite");
+    bad = m;
+    bad.positions[2].x = INFINITY;
+    CHECK(message_of([&] { s.add_mesh(bad); }).find("vertex 2") != std::string::npos);
+    bad = m;
+    bad.triangles[5][1] = std::uint32_t(bad.positions.size());
+    CHECK(message_of([&] { s.add_mesh(bad); }) ==
+          "ball.ply: mesh 'ball': triangle 5 uses vertex " + std::to_string(m.positions.size()) + " of " +
+              std::to_string(m.positions.size()));
+    bad = m;
+    bad.uvs.resize(3);
+    CHECK(message_of([&] { s.add_mesh(bad); }).find("texture coordinates for 3 of 80 triangles") != std::string::npos);
+    bad = m;
+    bad.material = 4;
+    CHECK(message_of([&] { s.add_mesh(bad); }).find("material index 4 does not exist") != std::string::npos);
+    CHECK(s.meshes().empty());
+    CHECK(s.add_mesh(m) == 0);
+}
+
+TEST_CASE("nodes refuse singular and non-finite transforms, missing targets and children of leaves") {
+    canopy::scene s;
+    auto const m = s.add_mesh(sphere("ball"));
+    CHECK(message_of([&] { s.add_transform(s.root(), xf::from_rows({1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0}), "flat"); })
+              .find("node 'flat': transform is singular") != std::string::npos);
+    CHECK(message_of([&] { s.add_transform(s.root(), translate(NAN, 0, 0), "nan"); }).find("not finite") !=
+          std::string::npos);
+    CHECK(message_of([&] { s.add_instance(s.root(), 99, xf::identity(), 0, "dangling"); })
+              .find("instance target 99 does not exist") != std::string::npos);
+    node_id const leaf = s.add_mesh_node(s.root(), m, "leaf");
+    CHECK(message_of([&] { s.add_group(leaf, "child"); }).find("a mesh node cannot have children") != std::string::npos);
+    CHECK(message_of([&] { s.add_camera(s.root(), {.eye = {1, 1, 1}, .target = {1, 1, 1}}, "cam"); })
+              .find("eye and target coincide") != std::string::npos);
+}
+
+// ---- compile(): the skip rules --------------------------------------------------------------
+
+TEST_CASE("a single untransformed mesh is traced without a top level") {
+    canopy::scene s;
+    auto const m = s.add_mesh(sphere("ball", 2));
+    s.add_mesh_node(s.add_transform(s.root(), xf::identity(), "identity"), m);
+    auto const c = canopy::compile(s);
+    CHECK(c.levels == 0);
+    CHECK(c.statistics.levels == 0);
+    CHECK(c.statistics.identity_transform_nodes == 1);
+    CHECK(decided(c, "no top-level BVH"));
+    CHECK(c.top_mesh_instances.empty());
+    CHECK(c.top1.empty());
+    check_against_brute_force(c, 300, 1);
+    // Bit for bit what the mesh BVH gives when traced directly.
+    auto const tris = canopy::make_icosphere(2);
+    auto const direct = canopy::build_binned_sah(tris);
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    for (int i = 0; i < 200; ++i) {
+        canopy::ray const r{{3 * unit(rng), 3 * unit(rng), 3 * unit(rng)}, 0.0f, {unit(rng), unit(rng), unit(rng)}, INFINITY};
+        canopy::default_intersector isect;
+        auto const a = c.closest_hit(r, isect);
+        auto const b = canopy::closest_hit(r, &direct, &direct + 1);
+        REQUIRE(a.hit == b.hit);
+        if (a.hit) CHECK((a.t == b.t && a.u == b.u && a.v == b.v && a.prim_id == b.prim_id));
+    }
+}
+
+TEST_CASE("a transformed single mesh gets a top level; a shared mesh is built once") {
+    canopy::scene s;
+    auto const m = s.add_mesh(sphere("ball"));
+    s.add_mesh_node(s.add_transform(s.root(), translate(3, 0, 0)), m);
+    auto const one = canopy::compile(s);
+    CHECK(one.levels == 1);
+    CHECK(one.statistics.placements == 1);
+    CHECK(one.statistics.identity_placements == 0);
+    check_against_brute_force(one, 200, 2);
+
+    s.add_mesh_node(s.add_transform(s.root(), scale_rotate_z(0.5f, 30.0f, {-2, 1, 0})), m);
+    s.add_mesh_node(s.root(), m); // placed as it is
+    auto const three = canopy::compile(s);
+    CHECK(three.levels == 1);
+    CHECK(three.meshes.size() == 1);
+    CHECK(three.statistics.meshes_built == 1);
+    CHECK(three.statistics.placements == 3);
+    CHECK(three.statistics.identity_placements == 1);
+    CHECK(three.statistics.triangles_stored == 80);
+    CHECK(three.statistics.triangles_placed == 240);
+    CHECK(decided(three, "1 of 3 placements have the identity transform: not applied"));
+    CHECK(three.top_mesh_instances[2].identity);
+    CHECK(!three.top_mesh_instances[0].identity);
+    check_against_brute_force(three, 400, 3);
+}
+
+TEST_CASE("instances of a multi-mesh subtree become a group at level 2; single-mesh subtrees are placed directly") {
+    canopy::scene s;
+    auto const ball = s.add_mesh(sphere("ball"));
+    auto const stone = s.add_mesh(sphere("stone", 0));
+    node_id const tree = s.add_group(canopy::no_node, "tree"); // a prototype outside the tree
+    s.add_mesh_node(tree, ball, "crown");
+    s.add_mesh_node(s.add_transform(tree, translate(0, -1.5f, 0)), stone, "trunk");
+    node_id const pebble = s.add_group(canopy::no_node, "pebble");
+    s.add_mesh_node(s.add_transform(pebble, scale_rotate_z(0.3f, 0.0f, {0, 0, 0})), stone);
+
+    for (int i = 0; i < 4; ++i) s.add_instance(s.root(), tree, scale_rotate_z(1.0f + 0.25f * float(i), 20.0f * float(i), {4.0f * float(i), 0, 0}), std::uint32_t(i));
+    s.add_instance(s.root(), pebble, translate(0, 0, 5), 10);
+    s.add_mesh_node(s.add_transform(s.root(), translate(0, 5, 0)), ball, "loose ball");
+
+    auto const c = canopy::compile(s);
+    CHECK(c.levels == 2);
+    CHECK(c.meshes.size() == 2);
+    CHECK(c.statistics.groups == 2); // the tree, and the extra group of loose placements
+    CHECK(c.statistics.group_instances == 4);
+    CHECK(c.top_groups.size() == 5);
+    CHECK(c.groups[0].placements.size() == 2);
+    CHECK(c.groups[1].placements.size() == 2); // the pebble (placed directly) and the loose ball
+    CHECK(decided(c, "1 instances of single-mesh subtrees: the mesh is placed directly"));
+    CHECK(decided(c, "one extra group, placed with the identity"));
+    CHECK(c.top_group_instances.back().identity);
+    check_against_brute_force(c, 600, 4);
+}
+
+TEST_CASE("a scene that is one untransformed subtree uses the subtree's placements as its top level") {
+    canopy::scene s;
+    auto const ball = s.add_mesh(sphere("ball"));
+    node_id const pair = s.add_group(canopy::no_node, "pair");
+    s.add_mesh_node(pair, ball);
+    s.add_mesh_node(s.add_transform(pair, translate(3, 0, 0)), ball);
+    s.add_instance(s.root(), pair, xf::identity(), 0);
+    auto const c = canopy::compile(s);
+    CHECK(c.levels == 1);
+    CHECK(c.groups.empty());
+    CHECK(c.top_meshes.size() == 2);
+    CHECK(decided(c, "its placements form the top level"));
+    check_against_brute_force(c, 200, 5);
+}
+
+TEST_CASE("nesting deeper than two levels is flattened into the group, transforms composed") {
+    canopy::scene s;
+    auto const ball = s.add_mesh(sphere("ball"));
+    auto const stone = s.add_mesh(sphere("stone", 0));
+    node_id const leaf = s.add_group(canopy::no_node, "leaf");
+    s.add_mesh_node(leaf, ball);
+    s.add_mesh_node(s.add_transform(leaf, translate(0, 2, 0)), stone);
+    node_id const branch = s.add_group(canopy::no_node, "branch");
+    s.add_instance(branch, leaf, scale_rotate_z(0.5f, 45.0f, {1, 0, 0}), 0);
+    s.add_instance(branch, leaf, scale_rotate_z(0.5f, -45.0f, {-1, 0, 0}), 1);
+    s.add_instance(s.root(), branch, translate(0, 0, 0.5f), 0);
+    s.add_instance(s.root(), branch, scale_rotate_z(2.0f, 90.0f, {0, 0, 8}), 1);
+    auto const c = canopy::compile(s);
+    CHECK(c.levels == 2);
+    CHECK(c.groups.size() == 1);
+    CHECK(c.groups[0].placements.size() == 4);
+    CHECK(c.statistics.flattened_placements == 4);
+    CHECK(decided(c, "flattened into their group"));
+    check_against_brute_force(c, 500, 6);
+}
+
+TEST_CASE("empty meshes and subtrees are dropped, unplaced meshes and unused images are skipped") {
+    canopy::scene s;
+    auto const ball = s.add_mesh(sphere("ball"));
+    auto const unused = s.add_mesh(sphere("unused"));
+    canopy::mesh_data nothing;
+    nothing.name = "nothing";
+    auto const empty = s.add_mesh(nothing);
+    (void)unused;
+    int const image = s.add_image({"leaf.png", 1, 1, {canopy::vec4<float>{1, 1, 1, 0}}});
+    canopy::material_data masked;
+    masked.name = "leaf";
+    masked.image = image;
+    masked.alpha = canopy::alpha_mode::mask;
+    s.add_material(masked); // no placed mesh uses it
+    s.add_mesh_node(s.root(), ball);
+    s.add_mesh_node(s.add_transform(s.root(), translate(2, 0, 0)), empty);
+    node_id const hollow = s.add_group(canopy::no_node, "hollow");
+    s.add_group(hollow);
+    s.add_instance(s.root(), hollow, translate(5, 0, 0), 0);
+    auto const c = canopy::compile(s);
+    CHECK(c.levels == 0); // what remains is one untransformed mesh
+    CHECK(c.statistics.meshes_empty == 1);
+    CHECK(c.statistics.subtrees_empty == 1);
+    CHECK(c.statistics.meshes_unreferenced == 1);
+    CHECK(c.statistics.meshes_built == 1);
+    CHECK(c.statistics.images_unused == 1);
+    CHECK(c.textures.empty());
+    CHECK(!c.statistics.alpha_mask_needed);
+    CHECK(decided(c, "no material in use has an alpha mask"));
+    CHECK(decided(c, "meshes without triangles: dropped"));
+    CHECK(decided(c, "instances of subtrees without meshes: dropped"));
+}
+
+TEST_CASE("the alpha-mask intersector is needed only when a placed mesh has a masked, textured material") {
+    canopy::scene s;
+    int const image = s.add_image({"leaf.png", 2, 1, {canopy::vec4<float>{1, 1, 1, 0}, canopy::vec4<float>{1, 1, 1, 1}}});
+    canopy::material_data leaf;
+    leaf.name = "leaf";
+    leaf.image = image;
+    leaf.alpha = canopy::alpha_mode::mask;
+    leaf.alpha_cutoff = 0.5f;
+    int const mat = s.add_material(leaf);
+    auto m = sphere("crown");
+    m.material = mat;
+    s.add_mesh_node(s.root(), s.add_mesh(m));
+    auto const c = canopy::compile(s);
+    CHECK(c.statistics.alpha_mask_needed);
+    CHECK(c.statistics.masked_materials_used == 1);
+    REQUIRE(c.textures.size() == 1);
+    CHECK(c.materials[std::size_t(mat) + 1].alpha_mask);
+    CHECK(c.materials[std::size_t(mat) + 1].texture == 0);
+    CHECK(c.meshes[0].material == mat + 1);
+}
+
+TEST_CASE("instance cycles are errors naming the nodes on the cycle") {
+    canopy::scene s;
+    auto const ball = s.add_mesh(sphere("ball"));
+    node_id const a = s.add_group(canopy::no_node, "a");
+    node_id const b = s.add_group(canopy::no_node, "b");
+    s.add_mesh_node(a, ball);
+    s.add_instance(a, b, translate(1, 0, 0), 0, "a→b");
+    s.add_instance(b, a, translate(0, 1, 0), 0, "b→a");
+    s.add_instance(s.root(), a, xf::identity(), 0);
+    std::string const msg = message_of([&] { canopy::compile(s, {.name = "loop.json"}); });
+    CHECK(msg.find("loop.json: instance cycle: ") == 0);
+    CHECK(msg.find("'a'") != std::string::npos);
+    CHECK(msg.find("'b'") != std::string::npos);
+    CHECK(msg.find("'a→b'") != std::string::npos);
+
+    canopy::scene t; // a cycle through children alone
+    node_id const g = t.add_group(t.root(), "g");
+    t.attach(g, t.root());
+    CHECK(message_of([&] { canopy::compile(t); }).find("instance cycle: 'root' → 'g' → 'root'") != std::string::npos);
+}
+
+TEST_CASE("a scene with nothing to trace is an error") {
+    canopy::scene s;
+    s.add_group(s.root(), "empty");
+    CHECK(message_of([&] { canopy::compile(s, {.name = "empty.json"}); }) ==
+          "empty.json: the scene has nothing to trace (no mesh with triangles is placed in it)");
+}
+
+TEST_CASE("cameras and lights are placed by the transforms above them") {
+    canopy::scene s;
+    s.add_mesh_node(s.root(), s.add_mesh(sphere("ball")));
+    node_id const rig = s.add_transform(s.root(), scale_rotate_z(2.0f, 90.0f, {1, 2, 3}), "rig");
+    s.add_camera(rig, {.eye = {1, 0, 0}, .target = {0, 0, 0}, .up = {0, 1, 0}, .fovy_degrees = 40.0f}, "cam");
+    canopy::light_data sun;
+    sun.direction = {1, 0, 0};
+    s.add_light(rig, sun, "sun");
+    auto const c = canopy::compile(s);
+    REQUIRE(c.camera.has_value());
+    // (1,0,0) scaled by 2, turned 90° about z → (0,2,0), then moved by (1,2,3).
+    CHECK(c.camera->eye.x == Approx(1.0f).margin(1e-6));
+    CHECK(c.camera->eye.y == Approx(4.0f));
+    CHECK(c.camera->eye.z == Approx(3.0f));
+    CHECK(c.camera->target.x == Approx(1.0f));
+    CHECK(c.camera->up.x == Approx(-2.0f));
+    REQUIRE(c.lights.size() == 1);
+    CHECK(c.lights[0].direction.y == Approx(1.0f));
+    CHECK(c.lights[0].direction.x == Approx(0.0f).margin(1e-6));
+}
+
+// ---- the registry ---------------------------------------------------------------------------
+
+TEST_CASE("the registry loads by extension, names what it knows, and rolls back failed loads") {
+    canopy::registry r;
+    int calls = 0;
+    r.add_loader(".tri", "test", "one triangle per line", [&](canopy::scene& s, std::filesystem::path const& file, node_id parent, canopy::registry const&) {
+        ++calls;
+        std::ifstream in(file);
+        canopy::mesh_data m;
+        m.name = file.stem().string();
+        float x;
+        while (in >> x) m.positions.push_back({x, 0, 0});
+        node_id const g = s.add_group(parent, m.name);
+        for (std::uint32_t i = 0; i + 2 < m.positions.size(); i += 3) m.triangles.push_back({i, i + 1, i + 2});
+        m.triangles.push_back({0, 1, 99}); // always bad: the load must leave nothing behind
+        s.add_mesh_node(g, s.add_mesh(m));
+        return g;
+    });
+    auto const dir = std::filesystem::temp_directory_path() / "canopy_scene_test";
+    std::filesystem::create_directories(dir);
+    std::ofstream(dir / "bad.TRI") << "1 2 3\n";
+    canopy::scene s;
+    std::string const msg = message_of([&] { r.load(s, dir / "bad.TRI"); });
+    CHECK(calls == 1);
+    CHECK(msg == (dir / "bad.TRI").string() + ": mesh 'bad': triangle 1 uses vertex 99 of 3");
+    CHECK(s.nodes().size() == 1);
+    CHECK(s.at(s.root()).children.empty());
+    CHECK(s.meshes().empty());
+
+    CHECK(message_of([&] { r.load(s, dir / "missing.tri"); }) == (dir / "missing.tri").string() + ": file not found");
+    CHECK(message_of([&] { r.load(s, dir / "scene.xyz"); }) ==
+          (dir / "scene.xyz").string() + ": unknown extension '.xyz' (known: .tri)");
+    CHECK(message_of([&] { r.load(s, dir / "bad.tri", s.root(), "other"); }).find("plugin 'other' does not load '.tri'") !=
+          std::string::npos);
+    CHECK(message_of([&] { r.generate(s, "forest", {}); }).find("generator 'forest': is not registered") !=
+          std::string::npos);
+    CHECK(message_of([&] { r.load_plugin(dir / "bad.TRI"); }).find("cannot load plugin") != std::string::npos);
+    std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("custom nodes are expanded by their registered type, and refused without one") {
+    canopy::registry r;
+    r.add_node_type("ball", "test", "a sphere of the given subdivisions", [](canopy::scene& s, node_id self, canopy::parameters const& p) {
+        auto const n = p.get_integer("subdivisions", 1, 0, 4, "ball");
+        s.add_mesh_node(self, s.add_mesh(sphere("ball", int(n))));
+        return self;
+    });
+    canopy::scene s;
+    s.add_custom(s.add_transform(s.root(), translate(1, 0, 0)), "ball", {{"subdivisions", "2"}}, "b");
+    CHECK(message_of([&] { canopy::compile(s); }).find("custom node of type 'ball' was not expanded") != std::string::npos);
+    auto const c = canopy::compile(s, {.plugins = &r});
+    CHECK(c.statistics.custom_nodes_expanded == 1);
+    CHECK(c.statistics.triangles_stored == 320);
+    CHECK(c.levels == 1);
+    check_against_brute_force(c, 100, 7);
+
+    canopy::scene t;
+    t.add_custom(t.root(), "ball", {{"subdivisions", "2.5"}}, "b");
+    CHECK(message_of([&] { canopy::compile(t, {.plugins = &r}); }) ==
+          "ball: parameter 'subdivisions': '2.5' is not an integer in [0, 4]");
+    canopy::scene u;
+    u.add_custom(u.root(), "tree", {}, "t");
+    CHECK(message_of([&] { canopy::compile(u, {.plugins = &r}); }).find("node type 'tree' is not registered") !=
+          std::string::npos);
+}
