@@ -4,12 +4,15 @@
 //                 [--intersector none|alpha|procedural|costs] [--threads N]
 //   canopy trace --scene FILE --rays FILE --query closest|any --out FILE
 //                [--intersector none|alpha] [--threads N]
-//   canopy info SCENE
+//   canopy info SCENE | --plugins
 //
 // `canopy render` without a scene renders the built-in demo (instanced alpha-masked billboards)
-// into the four images of Figure 1 of the custom-intersector paper.
-// Scenes: .obj (the benchmark OBJ subset: one BVH, no top level) or .inst (one shared mesh,
-// instanced: a top-level BVH over instances). Rays and hits use the benchmark formats.
+// into the four images of Figure 1 of the custom-intersector paper. With a scene, any file a
+// registered plugin loads (built-in, in CANOPY_PLUGIN_PATH, or given with --plugin FILE), or
+// gen:NAME[:KEY=VALUE,...] for a registered generator, is loaded into the scene graph, compiled
+// (canopy.scene's skip rules) and rendered with the scene's camera and lights when it has them.
+// `canopy trace` reads the benchmark formats (.obj subset: one BVH, no top level; .inst: one shared
+// mesh instanced under a top-level BVH); rays and hits use the benchmark formats too.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -34,6 +37,7 @@ import canopy;
 import canopy.bench_formats;
 import canopy.billboard_forest;
 import canopy.image_io;
+import canopy.plugins;
 
 namespace {
 
@@ -52,7 +56,7 @@ constexpr char const* main_usage =
     "commands:\n"
     "  render  render the demo scene (no SCENE) or a scene file into PNG images\n"
     "  trace   trace a ray file against a scene, write a hit file\n"
-    "  info    print scene and BVH statistics\n"
+    "  info    print scene statistics, compile decisions and BVH statistics\n"
     "run 'canopy <command> --help' for the options of a command\n";
 
 constexpr char const* trace_usage =
@@ -67,19 +71,28 @@ constexpr char const* trace_usage =
 
 constexpr char const* render_usage =
     "usage: canopy render [SCENE] [-o OUT] [--size WxH] [--spp N] [--kernel KIND]\n"
-    "                     [--intersector KIND] [--threads N]\n"
-    "  SCENE               .obj or .inst; without it, the built-in demo scene is rendered into the\n"
-    "                      four images of the paper's Figure 1 (alpha ignored, texture alpha mask,\n"
-    "                      procedural alpha mask, BVH cost heat map)\n"
+    "                     [--intersector KIND] [--threads N] [--plugin FILE]\n"
+    "  SCENE               a file any registered plugin loads (canopy info --plugins lists them),\n"
+    "                      or gen:NAME[:KEY=VALUE,...] for a registered generator; without it, the\n"
+    "                      built-in demo scene is rendered into the four images of the paper's\n"
+    "                      Figure 1 (alpha ignored, texture alpha mask, procedural alpha mask, BVH\n"
+    "                      cost heat map)\n"
     "  -o OUT              output folder (default: out)\n"
     "  --size WxH          image size (default 800x600)\n"
     "  --spp N             samples per pixel (default 1; 16 for ao and path)\n"
     "  --kernel KIND       primary (default), ao, path or heatmap\n"
-    "  --intersector KIND  none (default), alpha (texture mask; bench rule for .obj/.inst),\n"
-    "                      procedural (ring mask on masked materials) or costs (heat map)\n"
-    "  --threads N         worker threads (default: all cores)\n";
+    "  --intersector KIND  auto (default: alpha when the scene has masked materials, else none),\n"
+    "                      none, alpha (texture alpha mask), procedural (ring mask on masked\n"
+    "                      materials), bench (the alpha rule of the bench formats) or costs (heat map)\n"
+    "  --threads N         worker threads (default: all cores)\n"
+    "  --plugin FILE       load a shared-library plugin first (may be repeated)\n";
 
-constexpr char const* info_usage = "usage: canopy info SCENE\n  SCENE: .obj or .inst\n";
+constexpr char const* info_usage =
+    "usage: canopy info SCENE [--plugin FILE]...\n"
+    "       canopy info --plugins [--plugin FILE]...\n"
+    "  SCENE      a file any registered plugin loads, or gen:NAME[:KEY=VALUE,...]\n"
+    "  --plugins  list the registered loaders, image loaders, generators and node types\n"
+    "  --plugin FILE  load a shared-library plugin first (may be repeated)\n";
 
 // --name value pairs after the command; "--help" alone.
 std::map<std::string, std::string> parse_options(std::span<char*> args, std::vector<std::string> const& known,
@@ -114,7 +127,7 @@ struct loaded_scene {
     double build_seconds = 0.0;
 };
 
-std::unique_ptr<loaded_scene> load_scene(std::filesystem::path const& path) {
+std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path) {
     auto scene = std::make_unique<loaded_scene>();
     auto const ext = path.extension().string();
     if (ext == ".obj") {
@@ -169,7 +182,7 @@ int run_trace(std::span<char*> args) {
     std::string const scene_path = required(options, "--scene");
     std::string const rays_path = required(options, "--rays");
     std::string const out_path = required(options, "--out");
-    auto const scene = load_scene(scene_path);
+    auto const scene = load_bench_scene(scene_path);
     auto const rays = canopy::read_bench_rays(rays_path);
     std::vector<canopy::bench_hit> hits(rays.size());
     bool const closest = query == "closest";
@@ -195,6 +208,8 @@ int run_trace(std::span<char*> args) {
 }
 
 // ---- render ----------------------------------------------------------------------------------
+
+canopy::light_options lights_of(canopy::compiled_scene const& scene);
 
 // The scene as the kernels see it, counting the rays traced.
 struct counting_scene {
@@ -288,13 +303,9 @@ canopy::framebuffer render_kernel(counting_scene const& scene, render_job const&
         return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
             return canopy::ao_kernel(scene, r, isect, rng, 8, 2.0f);
         }, bar);
-    // The path kernel adds a point light above the middle of the scene to the sun and the sky.
-    canopy::light_options light;
-    canopy::aabb const box = scene.scene->bounds();
-    float const extent = canopy::length(canopy::diagonal(box));
-    light.point_light = true;
-    light.point_position = canopy::center(box) + canopy::vec3<float>(0.0f, 0.35f * extent, 0.0f);
-    light.point_intensity = canopy::vec3<float>(1.0f, 0.8f, 0.6f) * (0.05f * extent * extent);
+    // The path kernel adds a point light (the scene's, or one above the middle of the scene) to
+    // the sun and the sky.
+    canopy::light_options const light = lights_of(*scene.scene);
     if (job.kernel == "path")
         return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
             return canopy::path_kernel(scene, r, isect, rng, 3, light);
@@ -346,7 +357,7 @@ canopy::framebuffer render_heatmap(counting_scene const& scene, render_job const
     return fb;
 }
 
-render_result render_image(canopy::compiled_scene const& scene, render_job const& job, bool bench_scene) {
+render_result render_image(canopy::compiled_scene const& scene, render_job const& job) {
     std::atomic<std::uint64_t> rays{0};
     counting_scene const counted{&scene, &rays};
     progress_bar bar(job.output.filename().string());
@@ -356,7 +367,7 @@ render_result render_image(canopy::compiled_scene const& scene, render_job const
     if (job.kernel == "heatmap" || job.intersector == "costs") {
         fb = render_heatmap(counted, job, bar);
         linear = false;
-    } else if (job.intersector == "alpha" && bench_scene) {
+    } else if (job.intersector == "bench") {
         fb = render_kernel(counted, job, canopy::bench_alpha_intersector{}, bar);
     } else if (job.intersector == "alpha") {
         canopy::texture_alpha_mask mask;
@@ -383,25 +394,70 @@ canopy::texture2d<canopy::vec4<float>> load_texture(std::filesystem::path const&
     return {img.width, img.height, std::move(texels), {canopy::filter_mode::bilinear, canopy::address_mode::clamp}};
 }
 
-// A bench scene (.obj or .inst) as a compiled scene with one grey material.
-canopy::compiled_scene compile_bench_scene(std::filesystem::path const& path) {
-    canopy::compiled_scene scene;
-    canopy::compiled_mesh mesh;
-    if (path.extension() == ".inst") {
-        auto inst = canopy::read_bench_inst(path);
-        mesh.triangles = std::move(inst.mesh.triangles);
-        for (auto const& xf : inst.instances) scene.place(0, xf);
-    } else if (path.extension() == ".obj") {
-        mesh.triangles = canopy::read_bench_obj(path).triangles;
+// The registry of built-in plugins, plus shared-library plugins named on the command line.
+canopy::registry& plugin_registry(std::vector<std::string> const& plugin_files) {
+    canopy::registry& r = canopy::builtin_registry();
+    for (auto const& f : plugin_files) r.load_plugin(f);
+    return r;
+}
+
+// SCENE: a file, or gen:NAME[:KEY=VALUE,...].
+struct loaded_graph {
+    canopy::scene graph;
+    canopy::compiled_scene compiled;
+    double load_seconds = 0.0;
+};
+
+loaded_graph load_and_compile(std::string const& spec, canopy::registry const& r) {
+    loaded_graph out;
+    auto const start = clock_type::now();
+    if (spec.starts_with("gen:")) {
+        std::string_view rest = std::string_view(spec).substr(4);
+        auto const colon = rest.find(':');
+        std::string const name(rest.substr(0, colon));
+        canopy::parameters params;
+        if (colon != std::string_view::npos) {
+            rest.remove_prefix(colon + 1);
+            while (!rest.empty()) {
+                auto const comma = std::min(rest.find(','), rest.size());
+                std::string_view const item = rest.substr(0, comma);
+                auto const eq = item.find('=');
+                if (eq == std::string_view::npos || eq == 0)
+                    throw usage_error("generator parameter '" + std::string(item) + "' is not KEY=VALUE");
+                params.set(std::string(item.substr(0, eq)), std::string(item.substr(eq + 1)));
+                rest.remove_prefix(std::min(comma + 1, rest.size()));
+            }
+        }
+        r.generate(out.graph, name, params, out.graph.root());
     } else {
-        throw canopy::format_error(path.string() + ": unknown scene extension '" + path.extension().string() +
-                                   "' (expected .obj or .inst)");
+        r.load(out.graph, spec, out.graph.root());
     }
-    if (mesh.triangles.empty()) throw canopy::format_error(path.string() + ": the scene has no triangles");
-    scene.materials = {canopy::material{{0.75f, 0.75f, 0.75f}, -1, true, 0.01f}};
-    scene.meshes.push_back(std::move(mesh));
-    scene.build();
-    return scene;
+    out.load_seconds = seconds_since(start);
+    out.compiled = canopy::compile(out.graph, {.plugins = &r, .name = spec});
+    return out;
+}
+
+// The scene's own lights replace the default sun / point light where it has them.
+canopy::light_options lights_of(canopy::compiled_scene const& scene) {
+    canopy::light_options light;
+    canopy::aabb const box = scene.bounds();
+    float const extent = canopy::length(canopy::diagonal(box));
+    light.point_position = canopy::center(box) + canopy::vec3<float>(0.0f, 0.35f * extent, 0.0f);
+    light.point_intensity = canopy::vec3<float>(1.0f, 0.8f, 0.6f) * (0.05f * extent * extent);
+    light.point_light = true;
+    bool sun = false, point = false;
+    for (auto const& l : scene.lights) {
+        if (l.kind == canopy::light_data::directional && !sun) {
+            light.sun_direction = canopy::normalize(l.direction);
+            light.sun_colour = l.colour;
+            sun = true;
+        } else if (l.kind == canopy::light_data::point && !point) {
+            light.point_position = l.position;
+            light.point_intensity = l.colour;
+            point = true;
+        }
+    }
+    return light;
 }
 
 std::pair<int, int> parse_size(std::string const& text) {
@@ -415,9 +471,13 @@ std::pair<int, int> parse_size(std::string const& text) {
 int run_render(std::span<char*> args) {
     std::optional<std::string> scene_path;
     std::vector<char*> option_args;
+    std::vector<std::string> plugin_files;
     for (std::size_t i = 0; i < args.size(); ++i) {
         std::string_view const a = args[i];
-        if (!a.starts_with("-") && (i == 0 || !std::string_view(args[i - 1]).starts_with("-"))) {
+        if (a == "--plugin") {
+            if (i + 1 >= args.size()) throw usage_error("option '--plugin' needs a value");
+            plugin_files.emplace_back(args[++i]);
+        } else if (!a.starts_with("-") && (i == 0 || !std::string_view(args[i - 1]).starts_with("-"))) {
             if (scene_path) throw usage_error("more than one scene given");
             scene_path = std::string(a);
         } else {
@@ -433,10 +493,11 @@ int run_render(std::span<char*> args) {
     if (options.contains("--kernel")) base.kernel = options.at("--kernel");
     if (base.kernel != "primary" && base.kernel != "ao" && base.kernel != "path" && base.kernel != "heatmap")
         throw usage_error("--kernel must be primary, ao, path or heatmap, not '" + base.kernel + "'");
-    if (options.contains("--intersector")) base.intersector = options.at("--intersector");
-    if (base.intersector != "none" && base.intersector != "alpha" && base.intersector != "procedural" &&
-        base.intersector != "costs")
-        throw usage_error("--intersector must be none, alpha, procedural or costs, not '" + base.intersector + "'");
+    base.intersector = options.contains("--intersector") ? options.at("--intersector") : "auto";
+    if (base.intersector != "auto" && base.intersector != "none" && base.intersector != "alpha" &&
+        base.intersector != "procedural" && base.intersector != "bench" && base.intersector != "costs")
+        throw usage_error("--intersector must be auto, none, alpha, procedural, bench or costs, not '" +
+                          base.intersector + "'");
     base.spp = base.kernel == "ao" || base.kernel == "path" ? 16 : 1;
     if (options.contains("--spp")) {
         base.spp = std::atoi(options.at("--spp").c_str());
@@ -474,17 +535,32 @@ int run_render(std::span<char*> args) {
             if (f.kernel) job.kernel = f.kernel;
             job.intersector = f.intersector;
             job.output = out / f.file;
-            results.emplace_back(job.output.string(), render_image(forest.scene, job, false));
+            results.emplace_back(job.output.string(), render_image(forest.scene, job));
         }
     } else {
-        auto scene = compile_bench_scene(*scene_path);
-        canopy::aabb const box = scene.bounds();
-        auto const c = canopy::center(box);
-        float const extent = canopy::length(canopy::diagonal(box));
-        base.camera = canopy::pinhole_camera::look_at(c + canopy::vec3<float>(0.35f, 0.45f, 1.0f) * extent, c, {0, 1, 0},
-                                                      45.0f, aspect);
-        base.output = out / (std::filesystem::path(*scene_path).stem().string() + ".png");
-        results.emplace_back(base.output.string(), render_image(scene, base, true));
+        canopy::registry const& registry = plugin_registry(plugin_files);
+        auto const loaded = load_and_compile(*scene_path, registry);
+        canopy::compiled_scene const& scene = loaded.compiled;
+        auto const& st = scene.statistics;
+        fmt::print(stderr, "{}: {} triangles in {} meshes, {} placements, {} instance level{}; loaded in {:.1f} ms, "
+                           "compiled in {:.1f} ms\n",
+                   *scene_path, st.triangles_placed, st.meshes_built, st.placements, st.levels, st.levels == 1 ? "" : "s",
+                   loaded.load_seconds * 1e3, st.build_seconds * 1e3);
+        if (scene.camera) {
+            base.camera = canopy::pinhole_camera::look_at(scene.camera->eye, scene.camera->target, scene.camera->up,
+                                                          scene.camera->fovy_degrees, aspect);
+        } else {
+            canopy::aabb const box = scene.bounds();
+            auto const c = canopy::center(box);
+            float const extent = canopy::length(canopy::diagonal(box));
+            base.camera = canopy::pinhole_camera::look_at(c + canopy::vec3<float>(0.35f, 0.45f, 1.0f) * extent, c,
+                                                          {0, 1, 0}, 45.0f, aspect);
+        }
+        if (base.intersector == "auto") base.intersector = st.alpha_mask_needed ? "alpha" : "none";
+        std::string stem = std::filesystem::path(*scene_path).stem().string();
+        if (scene_path->starts_with("gen:")) stem = scene_path->substr(4, scene_path->find(':', 4) - 4);
+        base.output = out / (stem + ".png");
+        results.emplace_back(base.output.string(), render_image(scene, base));
     }
     double total_seconds = 0.0;
     std::uint64_t total_rays = 0;
@@ -506,19 +582,76 @@ void print_stats(char const* name, canopy::bvh_stats const& s) {
                s.bytes_per_primitive);
 }
 
+void print_registered(char const* what, std::vector<canopy::registered> const& list) {
+    fmt::print("{}:\n", what);
+    if (list.empty()) fmt::print("  (none)\n");
+    for (auto const& e : list)
+        fmt::print("  {:<20} {:<12} {}\n", e.name, e.plugin, e.description);
+}
+
 int run_info(std::span<char*> args) {
-    if (args.size() == 1 && (std::string_view(args[0]) == "--help" || std::string_view(args[0]) == "-h")) {
-        std::fputs(info_usage, stdout);
+    std::optional<std::string> scene_path;
+    std::vector<std::string> plugin_files;
+    bool list_plugins = false;
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        std::string_view const a = args[i];
+        if (a == "--help" || a == "-h") {
+            std::fputs(info_usage, stdout);
+            return 0;
+        }
+        if (a == "--plugins") {
+            list_plugins = true;
+        } else if (a == "--plugin") {
+            if (i + 1 >= args.size()) throw usage_error("option '--plugin' needs a value");
+            plugin_files.emplace_back(args[++i]);
+        } else if (a.starts_with("-")) {
+            throw usage_error("unknown option '" + std::string(a) + "'");
+        } else {
+            if (scene_path) throw usage_error("info takes exactly one scene");
+            scene_path = std::string(a);
+        }
+    }
+    if (list_plugins == scene_path.has_value()) throw usage_error("info takes exactly one scene, or --plugins");
+    canopy::registry const& registry = plugin_registry(plugin_files);
+    if (list_plugins) {
+        print_registered("file loaders (the first of an extension is its default)", registry.loaders());
+        print_registered("image loaders", registry.image_loaders());
+        print_registered("generators", registry.generators());
+        print_registered("node types", registry.node_types());
+        fmt::print("shared-library plugins loaded:{}\n", registry.plugins().empty() ? " none" : "");
+        for (auto const& p : registry.plugins()) fmt::print("  {}\n", p);
         return 0;
     }
-    if (args.size() != 1) throw usage_error("info takes exactly one scene file");
-    auto const scene = load_scene(args[0]);
-    fmt::print("scene {}: {} (built in {:.3f} ms)\n", args[0],
-               scene->instanced ? fmt::format("{} instances of one mesh, two levels", scene->instances.size())
-                                : std::string("one mesh, single level (no top-level BVH)"),
-               scene->build_seconds * 1e3);
-    print_stats("mesh BVH", canopy::compute_stats(scene->mesh));
-    if (scene->instanced) print_stats("top-level BVH", canopy::compute_stats(scene->top));
+    auto const loaded = load_and_compile(*scene_path, registry);
+    canopy::scene const& g = loaded.graph;
+    canopy::compiled_scene const& c = loaded.compiled;
+    auto const& st = c.statistics;
+    fmt::print("scene {}: loaded in {:.3f} ms\n", *scene_path, loaded.load_seconds * 1e3);
+    fmt::print("graph: {} nodes, {} meshes, {} materials, {} images, {} cameras, {} lights\n", g.nodes().size(),
+               g.meshes().size(), g.materials().size(), g.images().size(), st.cameras, st.lights);
+    fmt::print("compiled in {:.3f} ms: {} instance level{}, {} meshes built ({} triangles stored), {} placements "
+               "({} triangles placed), {} groups, {} group instances\n",
+               st.build_seconds * 1e3, st.levels, st.levels == 1 ? "" : "s", st.meshes_built, st.triangles_stored,
+               st.placements, st.triangles_placed, st.groups, st.group_instances);
+    fmt::print("decisions:\n");
+    for (auto const& d : st.decisions) fmt::print("  - {}\n", d);
+    std::size_t mesh_nodes = 0, mesh_prims = 0;
+    double mesh_bytes = 0.0;
+    for (auto const& m : c.meshes) {
+        auto const ms = canopy::compute_stats(m.accel);
+        mesh_nodes += ms.node_count;
+        mesh_prims += ms.primitive_count;
+        mesh_bytes += ms.bytes_per_primitive * double(ms.primitive_count);
+    }
+    if (c.meshes.size() == 1) {
+        print_stats("mesh BVH", canopy::compute_stats(c.meshes[0].accel));
+    } else {
+        fmt::print("mesh BVHs: {} BVHs, {} primitives, {} nodes, {:.1f} bytes/primitive\n", c.meshes.size(), mesh_prims,
+                   mesh_nodes, mesh_prims ? mesh_bytes / double(mesh_prims) : 0.0);
+    }
+    for (auto const& grp : c.groups) print_stats(fmt::format("group '{}' BVH", grp.name).c_str(), canopy::compute_stats(grp.accel));
+    if (c.levels == 1) print_stats("top-level BVH", canopy::compute_stats(c.top1));
+    if (c.levels == 2) print_stats("top-level BVH", canopy::compute_stats(c.top2));
     return 0;
 }
 
