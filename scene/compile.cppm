@@ -18,6 +18,8 @@
 //   - the alpha-mask intersector is needed only when a placed mesh has a masked material
 //     (compile_statistics::alpha_mask_needed); kernels run without one otherwise;
 //   - custom nodes are expanded by the plugins that registered their types.
+// Placements keep the order of the graph (depth first, children in order), so the inst_id of a
+// hit is the index of its placement in that order; placement::id keeps the instance node's own id.
 // Errors (scene_error): instance cycles (the message lists the nodes on the cycle), custom nodes
 // of an unregistered type, and a scene with nothing to trace.
 module;
@@ -84,14 +86,14 @@ struct frame {
     affine_transform<float> rounded() const { return identity ? affine_transform<float>::identity() : narrow(xf); }
 };
 
-struct mesh_item {
+// A placement found by the walk: a mesh (target = no_node) or an instanced subtree.
+struct item {
     std::uint32_t mesh;
-    frame where;
-};
-struct subtree_item {
     node_id target;
     frame where;
+    std::uint32_t id; // the user id of the instance node that placed it, or invalid_id
 };
+using mesh_item = item;
 
 std::string node_label(scene const& s, node_id n) {
     node const& nd = s.at(n);
@@ -108,24 +110,33 @@ public:
         stats_.meshes_in_scene = s_.meshes().size();
         check_cycles();
 
-        std::vector<mesh_item> meshes;
-        std::vector<subtree_item> subtrees;
-        walk(s_.root(), frame{}, meshes, subtrees, true);
+        std::vector<item> found;
+        walk(s_.root(), frame{}, found, true);
 
         // Resolve instanced subtrees: one mesh → placed directly; several → a group.
-        std::vector<std::pair<std::uint32_t, frame>> groups_placed; // (group, frame)
-        for (auto const& st : subtrees) {
+        struct group_item {
+            std::uint32_t group;
+            frame where;
+            std::uint32_t id;
+        };
+        std::vector<group_item> groups_placed;
+        std::vector<mesh_item> meshes; // in the order of the graph
+        for (auto const& st : found) {
+            if (st.target == no_node) {
+                meshes.push_back(st);
+                continue;
+            }
             prototype const& p = prototype_of(st.target);
             if (p.meshes.empty()) {
                 ++stats_.subtrees_empty;
                 continue;
             }
             if (p.meshes.size() == 1) {
-                meshes.push_back({p.meshes[0].mesh, st.where.then(p.meshes[0].where)});
+                meshes.push_back({p.meshes[0].mesh, no_node, st.where.then(p.meshes[0].where), st.id});
                 ++direct_single_mesh_;
                 continue;
             }
-            groups_placed.push_back({group_of(st.target), st.where});
+            groups_placed.push_back({group_of(st.target), st.where, st.id});
         }
 
         if (meshes.empty() && groups_placed.empty())
@@ -144,13 +155,13 @@ public:
                 decide("one mesh with an identity transform: traced directly, no top-level BVH (levels 0)");
             } else {
                 c.levels = 1;
-                for (auto const& m : meshes) add_placement(c.top_meshes, m.mesh, m.where);
+                for (auto const& m : meshes) add_placement(c.top_meshes, m);
                 decide("top-level BVH over " + std::to_string(c.top_meshes.size()) + " mesh placements (levels 1)");
             }
-        } else if (groups_placed.size() == 1 && meshes.empty() && groups_placed[0].second.identity) {
+        } else if (groups_placed.size() == 1 && meshes.empty() && groups_placed[0].where.identity) {
             c.levels = 1;
-            for (auto const& m : group_protos_[groups_placed[0].first].meshes)
-                add_placement(c.top_meshes, m.mesh, m.where);
+            for (auto const& m : group_protos_[groups_placed[0].group].meshes)
+                add_placement(c.top_meshes, m);
             group_protos_.clear();
             decide("one untransformed subtree: its placements form the top level (levels 1)");
         } else {
@@ -158,11 +169,11 @@ public:
             for (auto const& g : group_protos_) {
                 compiled_group cg;
                 cg.name = g.name;
-                for (auto const& m : g.meshes) add_placement(cg.placements, m.mesh, m.where);
+                for (auto const& m : g.meshes) add_placement(cg.placements, m);
                 c.groups.push_back(std::move(cg));
             }
-            for (auto const& [g, where] : groups_placed) {
-                c.top_groups.push_back({g, where.rounded()});
+            for (auto const& [g, where, id] : groups_placed) {
+                c.top_groups.push_back({g, where.rounded(), id});
                 ++stats_.group_instances;
             }
             if (!meshes.empty()) {
@@ -170,8 +181,8 @@ public:
                 // with the identity (the traversal reuses the ray: no transform is applied).
                 compiled_group loose;
                 loose.name = "(meshes outside instanced subtrees)";
-                for (auto const& m : meshes) add_placement(loose.placements, m.mesh, m.where);
-                c.top_groups.push_back({std::uint32_t(c.groups.size()), affine_transform<float>::identity()});
+                for (auto const& m : meshes) add_placement(loose.placements, m);
+                c.top_groups.push_back({std::uint32_t(c.groups.size()), affine_transform<float>::identity(), invalid_id});
                 c.groups.push_back(std::move(loose));
                 decide(std::to_string(meshes.size()) +
                        " mesh placements outside instanced subtrees: one extra group, placed with the identity");
@@ -274,16 +285,15 @@ private:
     }
 
     // Places scene mesh `source` (its compiled index is assigned on first use).
-    void add_placement(std::vector<placement>& out, std::uint32_t source, frame const& where) {
-        out.push_back({compiled_mesh_of(source), where.rounded()});
+    void add_placement(std::vector<placement>& out, mesh_item const& m) {
+        out.push_back({compiled_mesh_of(m.mesh), m.where.rounded(), m.id});
         ++stats_.placements;
-        stats_.triangles_placed += s_.meshes()[source].triangles.size();
+        stats_.triangles_placed += s_.meshes()[m.mesh].triangles.size();
         if (out.back().transform.is_identity()) ++stats_.identity_placements;
     }
 
     // Depth-first walk from `n`; top = whether cameras and lights here belong to the scene.
-    void walk(node_id n, frame const& where, std::vector<mesh_item>& meshes, std::vector<subtree_item>& subtrees,
-              bool top) {
+    void walk(node_id n, frame const& where, std::vector<item>& found, bool top) {
         node const& nd = s_.at(n);
         switch (nd.kind) {
         case node_kind::group:
@@ -291,21 +301,21 @@ private:
             if (nd.kind == node_kind::custom && nd.children.empty())
                 throw scene_error(nd.source.empty() ? o_.name : nd.source, "node " + node_label(s_, n),
                                   "custom node of type '" + nd.custom_type + "' was not expanded (no plugin registry given)");
-            for (node_id c : nd.children) walk(c, where, meshes, subtrees, top);
+            for (node_id c : nd.children) walk(c, where, found, top);
             break;
         case node_kind::transform:
             if (nd.transform.is_identity()) ++stats_.identity_transform_nodes;
-            for (node_id c : nd.children) walk(c, where.then(nd.transform), meshes, subtrees, top);
+            for (node_id c : nd.children) walk(c, where.then(nd.transform), found, top);
             break;
         case node_kind::mesh:
             if (s_.meshes()[nd.mesh].triangles.empty()) {
                 empty_meshes_.insert({nd.mesh, true});
                 break;
             }
-            meshes.push_back({nd.mesh, where});
+            found.push_back({nd.mesh, no_node, where, invalid_id});
             break;
         case node_kind::instance:
-            subtrees.push_back({nd.target, where.then(nd.transform)});
+            found.push_back({0, nd.target, where.then(nd.transform), nd.instance_id});
             break;
         case node_kind::camera:
             ++stats_.cameras;
@@ -338,14 +348,18 @@ private:
         auto& p = protos_[target];
         if (p.done) return p;
         p.name = s_.at(target).name;
+        std::vector<item> found;
+        walk(target, frame{}, found, false);
         std::vector<mesh_item> meshes;
-        std::vector<subtree_item> subtrees;
-        walk(target, frame{}, meshes, subtrees, false);
-        for (auto const& st : subtrees) {
+        for (auto const& st : found) {
+            if (st.target == no_node) {
+                meshes.push_back(st);
+                continue;
+            }
             prototype const& inner = prototype_of(st.target);
             if (inner.meshes.empty()) ++stats_.subtrees_empty;
             for (auto const& m : inner.meshes) {
-                meshes.push_back({m.mesh, st.where.then(m.where)});
+                meshes.push_back({m.mesh, no_node, st.where.then(m.where), inner.meshes.size() == 1 ? st.id : m.id});
                 if (inner.meshes.size() > 1) ++stats_.flattened_placements;
             }
         }

@@ -74,9 +74,12 @@ struct compile_statistics {
 };
 
 // A mesh or group put in place: index into compiled_scene::meshes or ::groups, object→world.
+// id: the user id of the scene graph's instance node that placed it (invalid_id for placements
+// made by mesh nodes); hits report placement indices, ids map them back.
 struct placement {
     std::uint32_t index = 0;
     affine_transform<float> transform = affine_transform<float>::identity();
+    std::uint32_t id = invalid_id;
 };
 
 using mesh_instance = instance<bvh<triangle>>;
@@ -125,7 +128,7 @@ struct compiled_scene {
     // Places mesh `m` at the top level (levels becomes at least 1).
     void place(std::uint32_t m, affine_transform<float> const& xf) {
         levels = std::max(levels, 1);
-        top_meshes.push_back({m, xf});
+        top_meshes.push_back({m, xf, invalid_id});
     }
 
     // Builds every mesh BVH, then the groups, then the top level. Meshes and groups must not be
@@ -180,6 +183,15 @@ struct compiled_scene {
         if (levels == 2) return canopy::any_hit(r, &top2, &top2 + 1, isect);
         if (levels == 1) return canopy::any_hit(r, &top1, &top1 + 1, isect);
         return canopy::any_hit(r, &meshes[0].accel, &meshes[0].accel + 1, isect);
+    }
+
+    // The user id of the instance a hit lies in: the innermost placement made by an instance node
+    // (invalid_id when no instance node placed it).
+    std::uint32_t instance_id(basic_hit_record<float> const& hr) const {
+        if (hr.inst_id == invalid_id || levels == 0) return invalid_id;
+        if (levels == 1) return top_meshes[hr.inst_id].id;
+        std::uint32_t const inner = groups[top_groups[hr.inst_id].index].placements[hr.inner_inst_id[0]].id;
+        return inner != invalid_id ? inner : top_groups[hr.inst_id].id;
     }
 
     // Object→world transform of the mesh a hit lies on (identity at level 0).

@@ -284,6 +284,19 @@ TEST_CASE("instances of a multi-mesh subtree become a group at level 2; single-m
     CHECK(decided(c, "1 instances of single-mesh subtrees: the mesh is placed directly"));
     CHECK(decided(c, "one extra group, placed with the identity"));
     CHECK(c.top_group_instances.back().identity);
+    // User ids of instance nodes come through; mesh nodes have none.
+    for (std::uint32_t i = 0; i < 4; ++i) CHECK(c.top_groups[i].id == i);
+    CHECK(c.top_groups[4].id == canopy::invalid_id);
+    CHECK(c.groups[1].placements[0].id == 10);
+    CHECK(c.groups[1].placements[1].id == canopy::invalid_id);
+    canopy::default_intersector isect;
+    auto const pebble_hit = c.closest_hit(canopy::ray{{0, 0, 20}, 0.0f, {0, 0, -1}, INFINITY}, isect);
+    REQUIRE(pebble_hit.hit);
+    CHECK(pebble_hit.t == Approx(20.0f - 5.0f - 0.3f).epsilon(0.02));
+    CHECK(c.instance_id(pebble_hit) == 10);
+    auto const tree_hit = c.closest_hit(canopy::ray{{8, 0, 20}, 0.0f, {0, 0, -1}, INFINITY}, isect);
+    REQUIRE(tree_hit.hit);
+    CHECK(c.instance_id(tree_hit) == 2);
     check_against_brute_force(c, 600, 4);
 }
 
