@@ -1,0 +1,732 @@
+// canopy.plugins.gltf — implementation: tinygltf's model → canopy's scene graph (see the module
+// interface for what is loaded and how). tinygltf is Debian's shared library (libtinygltf, which
+// holds the implementation, nlohmann json and stb_image); its header stays in this unit.
+module;
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+#include <tiny_gltf.h>
+module canopy.plugins.gltf;
+import canopy.math;
+import canopy.scene;
+
+namespace canopy {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// tinygltf's image callback: embedded images (data: URIs, buffer views) are decoded by tinygltf's
+// stb_image decoder; images referred to by uri are left undecoded and read later through the
+// registry's image loaders.
+bool decode_embedded_image(tinygltf::Image* image, int index, std::string* err, std::string* warn, int width,
+                           int height, unsigned char const* bytes, int size, void*) {
+    if (!image->uri.empty()) return true;
+    return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, nullptr);
+}
+
+// tinygltf's messages: lines joined with "; ", without the trailing newline.
+std::string tidy(std::string const& message) {
+    std::string out;
+    std::size_t start = 0;
+    while (start < message.size()) {
+        std::size_t end = message.find('\n', start);
+        if (end == std::string::npos) end = message.size();
+        std::string line = message.substr(start, end - start);
+        while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+        if (!line.empty()) out += (out.empty() ? "" : "; ") + line;
+        start = end + 1;
+    }
+    return out.empty() ? std::string("tinygltf could not load the file") : out;
+}
+
+float srgb_to_linear(double c) {
+    return float(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+}
+
+// "%20" → " " (glTF URIs are percent-encoded).
+std::string decode_uri(std::string const& uri) {
+    std::string out;
+    for (std::size_t i = 0; i < uri.size(); ++i) {
+        auto const hex = [](char c) {
+            if (c >= '0' && c <= '9') return c - '0';
+            if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+            if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+            return -1;
+        };
+        if (uri[i] == '%' && i + 2 < uri.size() && hex(uri[i + 1]) >= 0 && hex(uri[i + 2]) >= 0) {
+            out += char(hex(uri[i + 1]) * 16 + hex(uri[i + 2]));
+            i += 2;
+        } else {
+            out += uri[i];
+        }
+    }
+    return out;
+}
+
+std::string mode_name(int mode) {
+    switch (mode) {
+    case TINYGLTF_MODE_POINTS: return "POINTS";
+    case TINYGLTF_MODE_LINE: return "LINES";
+    case TINYGLTF_MODE_LINE_LOOP: return "LINE_LOOP";
+    case TINYGLTF_MODE_LINE_STRIP: return "LINE_STRIP";
+    default: return std::to_string(mode);
+    }
+}
+
+// Bytes of one component of a glTF component type, 0 for types glTF 2.0 does not allow.
+std::size_t component_size(int type) {
+    switch (type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return 2;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: return 4;
+    default: return 0;
+    }
+}
+
+// One component at p; normalized integers map to [0, 1] (unsigned) or [-1, 1] (signed).
+double read_component(unsigned char const* p, int type, bool normalized) {
+    switch (type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE: {
+        std::int8_t v;
+        std::memcpy(&v, p, 1);
+        return normalized ? std::max(double(v) / 127.0, -1.0) : double(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
+        std::uint8_t v;
+        std::memcpy(&v, p, 1);
+        return normalized ? double(v) / 255.0 : double(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_SHORT: {
+        std::int16_t v;
+        std::memcpy(&v, p, 2);
+        return normalized ? std::max(double(v) / 32767.0, -1.0) : double(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+        std::uint16_t v;
+        std::memcpy(&v, p, 2);
+        return normalized ? double(v) / 65535.0 : double(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+        std::uint32_t v;
+        std::memcpy(&v, p, 4);
+        return double(v);
+    }
+    default: {
+        float v;
+        std::memcpy(&v, p, 4);
+        return double(v);
+    }
+    }
+}
+
+template <typename T>
+std::string index_name(char const* array, T i) {
+    return std::string(array) + "[" + std::to_string(i) + "]";
+}
+
+// The conversion of one loaded model into a scene.
+class converter {
+public:
+    converter(tinygltf::Model const& model, fs::path const& file, scene& s, registry const& r)
+        : model_(model), file_(file), name_(file.string()), s_(s), r_(r),
+          materials_(model.materials.size()), meshes_(model.meshes.size()) {}
+
+    node_id run(node_id parent) {
+        for (auto const& ext : model_.extensionsRequired)
+            fail("extensionsRequired", "the file requires extension " + ext + ", which this loader does not support");
+
+        std::vector<int> roots;
+        std::string roots_where;
+        if (!model_.scenes.empty()) {
+            int const chosen = model_.defaultScene >= 0 ? model_.defaultScene : 0;
+            if (std::size_t(chosen) >= model_.scenes.size())
+                fail("scene", "scene " + std::to_string(chosen) + " does not exist (" +
+                                  std::to_string(model_.scenes.size()) + " scenes)");
+            roots = model_.scenes[std::size_t(chosen)].nodes;
+            roots_where = index_name("scenes", chosen);
+        } else {
+            // No scene: every node that is no node's child.
+            std::vector<bool> is_child(model_.nodes.size(), false);
+            for (std::size_t n = 0; n < model_.nodes.size(); ++n)
+                for (int c : model_.nodes[n].children)
+                    if (c >= 0 && std::size_t(c) < model_.nodes.size()) is_child[std::size_t(c)] = true;
+            for (std::size_t n = 0; n < model_.nodes.size(); ++n)
+                if (!is_child[n]) roots.push_back(int(n));
+            if (roots.empty() && !model_.nodes.empty())
+                fail("nodes", "the file has no scene and every node is another node's child (a cycle)");
+            roots_where = "nodes";
+        }
+
+        node_id const group = s_.add_group(parent, file_.filename().string());
+        struct pending {
+            int node;
+            node_id parent;
+        };
+        std::vector<pending> stack;
+        std::vector<bool> visited(model_.nodes.size(), false);
+        auto const push_children = [&](std::vector<int> const& children, node_id under, std::string const& where) {
+            for (auto it = children.rbegin(); it != children.rend(); ++it) {
+                if (*it < 0 || std::size_t(*it) >= model_.nodes.size())
+                    fail(where, "node " + std::to_string(*it) + " does not exist (" +
+                                    std::to_string(model_.nodes.size()) + " nodes)");
+                stack.push_back({*it, under});
+            }
+        };
+        push_children(roots, group, roots_where);
+        while (!stack.empty()) {
+            pending const p = stack.back();
+            stack.pop_back();
+            std::string const where = index_name("nodes", p.node);
+            if (visited[std::size_t(p.node)])
+                fail(where, "is reached twice (it is the child of two nodes, listed twice, or on a cycle)");
+            visited[std::size_t(p.node)] = true;
+            tinygltf::Node const& n = model_.nodes[std::size_t(p.node)];
+            std::string const name = n.name.empty() ? where : n.name;
+            node_id const t = guarded(where, [&] { return s_.add_transform(p.parent, transform_of(n, where), name); });
+            if (n.mesh >= 0 || n.mesh < -1) place_mesh(n.mesh, t, where, name);
+            if (n.camera >= 0 || n.camera < -1) place_camera(n.camera, t, where, name);
+            push_children(n.children, t, where + ".children");
+        }
+        return group;
+    }
+
+private:
+    [[noreturn]] void fail(std::string const& where, std::string const& problem) const {
+        throw scene_error(name_, where, problem);
+    }
+
+    // Runs f (a call into the scene graph) and gives its scene_error this file and element.
+    template <typename F>
+    auto guarded(std::string const& where, F&& f) -> decltype(f()) {
+        try {
+            return f();
+        } catch (scene_error const& e) {
+            fail(where, e.problem());
+        }
+    }
+
+    // ---- Nodes ----------------------------------------------------------------------------------
+
+    affine_transform<float> transform_of(tinygltf::Node const& n, std::string const& where) const {
+        affine_transform<double> xf = affine_transform<double>::identity();
+        bool const trs = !n.translation.empty() || !n.rotation.empty() || !n.scale.empty();
+        auto const all_finite = [](std::vector<double> const& v) {
+            return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+        };
+        if (!n.matrix.empty()) {
+            if (trs) fail(where, "has both a matrix and translation/rotation/scale");
+            if (n.matrix.size() != 16)
+                fail(where, "matrix has " + std::to_string(n.matrix.size()) + " values (16 needed)");
+            if (!all_finite(n.matrix)) fail(where, "matrix has a value that is not finite");
+            auto const& m = n.matrix; // column-major
+            if (m[3] != 0.0 || m[7] != 0.0 || m[11] != 0.0 || m[15] != 1.0)
+                fail(where, "matrix is not affine (its last row is not 0 0 0 1)");
+            xf.linear = mat3<double>{vec3<double>(m[0], m[1], m[2]), vec3<double>(m[4], m[5], m[6]),
+                                     vec3<double>(m[8], m[9], m[10])};
+            xf.translation = vec3<double>(m[12], m[13], m[14]);
+        } else if (trs) {
+            auto const check = [&](std::vector<double> const& v, std::size_t size, char const* what) {
+                if (!v.empty() && v.size() != size)
+                    fail(where, std::string(what) + " has " + std::to_string(v.size()) + " values (" +
+                                    std::to_string(size) + " needed)");
+                if (!all_finite(v)) fail(where, std::string(what) + " has a value that is not finite");
+            };
+            check(n.translation, 3, "translation");
+            check(n.rotation, 4, "rotation");
+            check(n.scale, 3, "scale");
+            // T · R · S, in that order (glTF 2.0, §3.5.3).
+            mat3<double> linear = mat3<double>::identity();
+            if (!n.rotation.empty()) {
+                double x = n.rotation[0], y = n.rotation[1], z = n.rotation[2], w = n.rotation[3];
+                double const norm = std::sqrt(x * x + y * y + z * z + w * w);
+                if (!(norm > 0.0)) fail(where, "rotation is not a unit quaternion (its length is 0)");
+                x /= norm, y /= norm, z /= norm, w /= norm;
+                linear = mat3<double>{vec3<double>(1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)),
+                                      vec3<double>(2 * (x * y - z * w), 1 - 2 * (x * x + z * z), 2 * (y * z + x * w)),
+                                      vec3<double>(2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y))};
+            }
+            if (!n.scale.empty()) {
+                if (n.scale[0] == 0.0 || n.scale[1] == 0.0 || n.scale[2] == 0.0)
+                    fail(where, "scale has a zero component: canopy places geometry only with invertible transforms");
+                linear.col0 = linear.col0 * n.scale[0];
+                linear.col1 = linear.col1 * n.scale[1];
+                linear.col2 = linear.col2 * n.scale[2];
+            }
+            xf.linear = linear;
+            if (!n.translation.empty()) xf.translation = vec3<double>(n.translation[0], n.translation[1], n.translation[2]);
+        }
+        return {{vec3<float>(xf.linear.col0), vec3<float>(xf.linear.col1), vec3<float>(xf.linear.col2)},
+                vec3<float>(xf.translation)};
+    }
+
+    void place_mesh(int mesh, node_id under, std::string const& where, std::string const& name) {
+        if (mesh < 0 || std::size_t(mesh) >= model_.meshes.size())
+            fail(where, "mesh " + std::to_string(mesh) + " does not exist (" + std::to_string(model_.meshes.size()) +
+                            " meshes)");
+        std::vector<std::uint32_t> const& prims = mesh_of(mesh);
+        if (prims.size() == 1) {
+            s_.add_mesh_node(under, prims[0], name + " (mesh)");
+            return;
+        }
+        node_id const group = s_.add_group(under, name + " (mesh)");
+        for (std::uint32_t m : prims) s_.add_mesh_node(group, m, s_.meshes()[m].name);
+    }
+
+    void place_camera(int camera, node_id under, std::string const& where, std::string const& name) {
+        if (camera < 0 || std::size_t(camera) >= model_.cameras.size())
+            fail(where, "camera " + std::to_string(camera) + " does not exist (" +
+                            std::to_string(model_.cameras.size()) + " cameras)");
+        std::string const cwhere = index_name("cameras", camera);
+        tinygltf::Camera const& c = model_.cameras[std::size_t(camera)];
+        if (c.type != "perspective")
+            fail(cwhere, "camera type '" + c.type + "' is not supported (canopy cameras are perspective)");
+        double const yfov = c.perspective.yfov;
+        if (!(yfov > 0.0 && yfov < 3.141592653589793))
+            fail(cwhere, "yfov " + std::to_string(yfov) + " is not in (0, π) radians");
+        camera_data data;
+        data.eye = {0.0f, 0.0f, 0.0f};
+        data.target = {0.0f, 0.0f, -1.0f};
+        data.up = {0.0f, 1.0f, 0.0f};
+        data.fovy_degrees = float(yfov * (180.0 / 3.141592653589793));
+        guarded(cwhere, [&] { return s_.add_camera(under, data, c.name.empty() ? name + " (camera)" : c.name); });
+    }
+
+    // ---- Accessors --------------------------------------------------------------------------------
+
+    // `count` elements of `element_size` bytes, `stride` apart from `offset` in bufferView `view`:
+    // the first one, after checking that all lie inside the view and the view inside its buffer.
+    unsigned char const* view_data(int view, std::size_t offset, std::size_t count, std::size_t element_size,
+                                   std::size_t stride, std::string const& where, std::string const& what) const {
+        if (view < 0 || std::size_t(view) >= model_.bufferViews.size())
+            fail(where, what + ": bufferView " + std::to_string(view) + " does not exist (" +
+                            std::to_string(model_.bufferViews.size()) + " buffer views)");
+        tinygltf::BufferView const& bv = model_.bufferViews[std::size_t(view)];
+        std::string const vname = index_name("bufferViews", view);
+        if (bv.buffer < 0 || std::size_t(bv.buffer) >= model_.buffers.size())
+            fail(where, what + ": " + vname + " refers to buffer " + std::to_string(bv.buffer) + ", which does not exist");
+        std::vector<unsigned char> const& data = model_.buffers[std::size_t(bv.buffer)].data;
+        if (bv.byteOffset > data.size() || bv.byteLength > data.size() - bv.byteOffset)
+            fail(where, what + ": " + vname + " (bytes " + std::to_string(bv.byteOffset) + " + " +
+                            std::to_string(bv.byteLength) + ") lies outside " + index_name("buffers", bv.buffer) +
+                            " (" + std::to_string(data.size()) + " bytes)");
+        if (count > 0) {
+            bool const inside = offset <= bv.byteLength && element_size <= bv.byteLength - offset &&
+                                count - 1 <= (bv.byteLength - offset - element_size) / stride;
+            if (!inside)
+                fail(where, what + ": " + std::to_string(count) + " elements of " + std::to_string(element_size) +
+                                " bytes, " + std::to_string(stride) + " apart from byte " + std::to_string(offset) +
+                                ", do not fit in " + vname + " (" + std::to_string(bv.byteLength) + " bytes)");
+        }
+        return data.data() + bv.byteOffset + offset;
+    }
+
+    // The values of accessor `index` (count × its component count), sparse substitution applied.
+    // `what` names the use ("POSITION (accessors[3])") in messages at `where`.
+    std::vector<double> read_accessor(int index, int components, std::string const& where, std::string const& what,
+                                      std::size_t& count) const {
+        tinygltf::Accessor const& a = model_.accessors[std::size_t(index)];
+        std::size_t const size = component_size(a.componentType);
+        if (size == 0) fail(where, what + ": component type " + std::to_string(a.componentType) + " is not allowed");
+        if (tinygltf::GetNumComponentsInType(std::uint32_t(a.type)) != components)
+            fail(where, what + ": has " + std::to_string(tinygltf::GetNumComponentsInType(std::uint32_t(a.type))) +
+                            " components per element (" + std::to_string(components) + " needed)");
+        std::size_t const element = size * std::size_t(components);
+        count = a.count;
+        std::vector<double> values;
+        if (a.bufferView >= 0) {
+            tinygltf::BufferView const& bv = a.bufferView < int(model_.bufferViews.size())
+                                                 ? model_.bufferViews[std::size_t(a.bufferView)]
+                                                 : tinygltf::BufferView{};
+            std::size_t const stride = bv.byteStride == 0 ? element : bv.byteStride;
+            if (stride < element)
+                fail(where, what + ": byteStride " + std::to_string(stride) + " is smaller than an element (" +
+                                std::to_string(element) + " bytes)");
+            unsigned char const* p = view_data(a.bufferView, a.byteOffset, count, element, stride, where, what);
+            values.resize(count * std::size_t(components));
+            for (std::size_t i = 0; i < count; ++i)
+                for (int c = 0; c < components; ++c)
+                    values[i * std::size_t(components) + std::size_t(c)] =
+                        read_component(p + i * stride + std::size_t(c) * size, a.componentType, a.normalized);
+        } else {
+            if (!a.sparse.isSparse) fail(where, what + ": has neither a bufferView nor sparse values");
+            values.assign(count * std::size_t(components), 0.0);
+        }
+        if (a.sparse.isSparse) {
+            auto const& sp = a.sparse;
+            if (sp.count < 1 || std::size_t(sp.count) > count)
+                fail(where, what + ": sparse count " + std::to_string(sp.count) + " is not in [1, " +
+                                std::to_string(count) + "]");
+            int const itype = sp.indices.componentType;
+            if (itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+                itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+                fail(where, what + ": sparse indices have component type " + std::to_string(itype) +
+                                " (unsigned byte, short or int needed)");
+            if (sp.indices.byteOffset < 0 || sp.values.byteOffset < 0)
+                fail(where, what + ": sparse byteOffset is negative");
+            std::size_t const n = std::size_t(sp.count);
+            std::size_t const isize = component_size(itype);
+            unsigned char const* ip = view_data(sp.indices.bufferView, std::size_t(sp.indices.byteOffset), n, isize,
+                                                isize, where, what + " sparse indices");
+            unsigned char const* vp = view_data(sp.values.bufferView, std::size_t(sp.values.byteOffset), n, element,
+                                                element, where, what + " sparse values");
+            double previous = -1.0;
+            for (std::size_t k = 0; k < n; ++k) {
+                double const i = read_component(ip + k * isize, itype, false);
+                if (i <= previous || i >= double(count))
+                    fail(where, what + ": sparse index " + std::to_string(std::uint64_t(i)) + " at position " +
+                                    std::to_string(k) + " is out of range or not increasing (" +
+                                    std::to_string(count) + " elements)");
+                previous = i;
+                for (int c = 0; c < components; ++c)
+                    values[std::size_t(i) * std::size_t(components) + std::size_t(c)] =
+                        read_component(vp + k * element + std::size_t(c) * size, a.componentType, a.normalized);
+            }
+        }
+        return values;
+    }
+
+    int accessor_index(std::map<std::string, int> const& attributes, std::string const& key,
+                       std::string const& where) const {
+        auto it = attributes.find(key);
+        if (it == attributes.end()) return -1;
+        if (it->second < 0 || std::size_t(it->second) >= model_.accessors.size())
+            fail(where, key + ": accessor " + std::to_string(it->second) + " does not exist (" +
+                            std::to_string(model_.accessors.size()) + " accessors)");
+        return it->second;
+    }
+
+    // A float VEC2/VEC3 attribute with `vertices` elements (or normalized u8/u16 when allowed).
+    std::vector<double> read_attribute(int accessor, std::string const& key, int components, bool normalized_ok,
+                                       std::size_t vertices, std::string const& where) const {
+        std::string const what = key + " (" + index_name("accessors", accessor) + ")";
+        tinygltf::Accessor const& a = model_.accessors[std::size_t(accessor)];
+        bool const normalized_int = a.normalized && (a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+                                                     a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT);
+        if (a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT && !(normalized_ok && normalized_int))
+            fail(where, what + ": component type " + std::to_string(a.componentType) + " is not supported (float" +
+                            (normalized_ok ? std::string(", or normalized unsigned byte or short,") : std::string()) +
+                            " needed)");
+        std::size_t count = 0;
+        std::vector<double> values = read_accessor(accessor, components, where, what, count);
+        if (vertices != std::size_t(-1) && count != vertices)
+            fail(where, what + ": has " + std::to_string(count) + " elements for " + std::to_string(vertices) +
+                            " vertices");
+        for (std::size_t i = 0; i < values.size(); ++i)
+            if (!std::isfinite(values[i]))
+                fail(where, what + ": vertex " + std::to_string(i / std::size_t(components)) +
+                                " has a value that is not finite");
+        return values;
+    }
+
+    // ---- Meshes -----------------------------------------------------------------------------------
+
+    std::vector<std::uint32_t> const& mesh_of(int mesh) {
+        auto& slot = meshes_[std::size_t(mesh)];
+        if (slot) return *slot;
+        tinygltf::Mesh const& m = model_.meshes[std::size_t(mesh)];
+        std::vector<std::uint32_t> prims;
+        for (std::size_t p = 0; p < m.primitives.size(); ++p) prims.push_back(primitive(mesh, p));
+        slot = std::move(prims);
+        return *slot;
+    }
+
+    std::uint32_t primitive(int mesh, std::size_t index) {
+        tinygltf::Mesh const& m = model_.meshes[std::size_t(mesh)];
+        tinygltf::Primitive const& p = m.primitives[index];
+        std::string const where = index_name("meshes", mesh) + "." + index_name("primitives", index);
+        if (p.mode < TINYGLTF_MODE_TRIANGLES || p.mode > TINYGLTF_MODE_TRIANGLE_FAN)
+            fail(where, "mode " + mode_name(p.mode) +
+                            " is not supported (TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN are)");
+
+        // Positions.
+        int const position = accessor_index(p.attributes, "POSITION", where);
+        if (position < 0) fail(where, "has no POSITION attribute");
+        std::vector<double> const xyz = read_attribute(position, "POSITION", 3, false, std::size_t(-1), where);
+        std::size_t const vertices = xyz.size() / 3;
+        if (vertices > std::size_t(UINT32_MAX)) fail(where, "has more than 2^32 - 1 vertices");
+
+        // Indices, in range.
+        std::vector<std::uint32_t> indices;
+        if (p.indices >= 0) {
+            if (std::size_t(p.indices) >= model_.accessors.size())
+                fail(where, "indices: accessor " + std::to_string(p.indices) + " does not exist");
+            std::string const what = "indices (" + index_name("accessors", p.indices) + ")";
+            int const type = model_.accessors[std::size_t(p.indices)].componentType;
+            if (type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+                type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+                fail(where, what + ": component type " + std::to_string(type) +
+                                " is not allowed (unsigned byte, short or int needed)");
+            std::size_t count = 0;
+            std::vector<double> const raw = read_accessor(p.indices, 1, where, what, count);
+            indices.reserve(raw.size());
+            for (std::size_t k = 0; k < raw.size(); ++k) {
+                if (raw[k] >= double(vertices))
+                    fail(where, "index " + std::to_string(std::uint64_t(raw[k])) + " at position " + std::to_string(k) +
+                                    " is out of range (" + std::to_string(vertices) + " vertices)");
+                indices.push_back(std::uint32_t(raw[k]));
+            }
+        } else {
+            indices.resize(vertices);
+            for (std::size_t k = 0; k < vertices; ++k) indices[k] = std::uint32_t(k);
+        }
+
+        // Triangles, as the glTF specification lists them for each mode (§3.7.2.1).
+        mesh_data md;
+        md.source = name_;
+        std::string const mesh_name = m.name.empty() ? index_name("meshes", mesh) : m.name;
+        md.name = m.primitives.size() == 1 ? mesh_name : mesh_name + "." + index_name("primitives", index);
+        std::size_t const n = indices.size();
+        if (p.mode == TINYGLTF_MODE_TRIANGLES) {
+            if (n % 3 != 0) fail(where, "has " + std::to_string(n) + " vertices in TRIANGLES mode (not a multiple of 3)");
+            for (std::size_t k = 0; k < n; k += 3) md.triangles.push_back({indices[k], indices[k + 1], indices[k + 2]});
+        } else if (p.mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+            for (std::size_t k = 0; k + 2 < n; ++k)
+                md.triangles.push_back(k % 2 == 0 ? std::array{indices[k], indices[k + 1], indices[k + 2]}
+                                                  : std::array{indices[k], indices[k + 2], indices[k + 1]});
+        } else {
+            for (std::size_t k = 0; k + 2 < n; ++k) md.triangles.push_back({indices[k + 1], indices[k + 2], indices[0]});
+        }
+        md.positions.reserve(vertices);
+        for (std::size_t v = 0; v < vertices; ++v)
+            md.positions.push_back(vec3<float>(float(xyz[3 * v]), float(xyz[3 * v + 1]), float(xyz[3 * v + 2])));
+        for (std::size_t v = 0; v < vertices; ++v)
+            if (!std::isfinite(md.positions[v].x) || !std::isfinite(md.positions[v].y) || !std::isfinite(md.positions[v].z))
+                fail(where, "POSITION: vertex " + std::to_string(v) + " does not fit in a float");
+
+        // Material, and the texture coordinates its base colour texture reads.
+        int uv_set = 0;
+        bool uv_required = false;
+        if (p.material >= 0 || p.material < -1) {
+            if (std::size_t(p.material) >= model_.materials.size())
+                fail(where, "material " + std::to_string(p.material) + " does not exist (" +
+                                std::to_string(model_.materials.size()) + " materials)");
+            md.material = material(p.material);
+            auto const& info = model_.materials[std::size_t(p.material)].pbrMetallicRoughness.baseColorTexture;
+            if (info.index >= 0) {
+                uv_set = info.texCoord;
+                uv_required = true;
+            }
+        }
+        std::string const uv_key = "TEXCOORD_" + std::to_string(uv_set);
+        int const uv = accessor_index(p.attributes, uv_key, where);
+        if (uv < 0 && uv_required)
+            fail(where, "its material's base colour texture reads " + uv_key + ", which the primitive does not have");
+        if (uv >= 0) {
+            std::vector<double> const st = read_attribute(uv, uv_key, 2, true, vertices, where);
+            md.uvs.reserve(md.triangles.size());
+            for (auto const& t : md.triangles) {
+                std::array<vec2<float>, 3> corners;
+                for (std::size_t k = 0; k < 3; ++k)
+                    corners[k] = vec2<float>(float(st[2 * t[k]]), float(st[2 * t[k] + 1]));
+                md.uvs.push_back(corners);
+            }
+        }
+        int const normal = accessor_index(p.attributes, "NORMAL", where);
+        if (normal >= 0) {
+            std::vector<double> const nxyz = read_attribute(normal, "NORMAL", 3, false, vertices, where);
+            md.normals.reserve(md.triangles.size());
+            for (auto const& t : md.triangles) {
+                std::array<vec3<float>, 3> corners;
+                for (std::size_t k = 0; k < 3; ++k)
+                    corners[k] =
+                        vec3<float>(float(nxyz[3 * t[k]]), float(nxyz[3 * t[k] + 1]), float(nxyz[3 * t[k] + 2]));
+                md.normals.push_back(corners);
+            }
+        }
+        return guarded(where, [&] { return s_.add_mesh(std::move(md)); });
+    }
+
+    // ---- Materials and images ---------------------------------------------------------------------
+
+    int material(int index) {
+        auto& slot = materials_[std::size_t(index)];
+        if (slot) return *slot;
+        std::string const where = index_name("materials", index);
+        tinygltf::Material const& m = model_.materials[std::size_t(index)];
+        auto const& pbr = m.pbrMetallicRoughness;
+        std::array<double, 4> factor{1.0, 1.0, 1.0, 1.0};
+        if (!pbr.baseColorFactor.empty()) {
+            if (pbr.baseColorFactor.size() != 4)
+                fail(where, "baseColorFactor has " + std::to_string(pbr.baseColorFactor.size()) + " values (4 needed)");
+            for (std::size_t k = 0; k < 4; ++k) {
+                factor[k] = pbr.baseColorFactor[k];
+                if (!(factor[k] >= 0.0 && factor[k] <= 1.0))
+                    fail(where, "baseColorFactor has a value outside [0, 1]");
+            }
+        }
+        material_data md;
+        md.name = m.name.empty() ? where : m.name;
+        md.colour = vec3<float>(float(factor[0]), float(factor[1]), float(factor[2]));
+        bool masked = false;
+        if (m.alphaMode == "MASK") {
+            masked = true;
+            if (!(m.alphaCutoff >= 0.0 && m.alphaCutoff <= 1.0))
+                fail(where, "alphaCutoff " + std::to_string(m.alphaCutoff) + " is not in [0, 1]");
+            md.alpha_cutoff = float(m.alphaCutoff);
+        } else if (m.alphaMode == "BLEND") {
+            masked = true;
+            md.alpha_cutoff = 0.5f;
+        } else if (m.alphaMode != "OPAQUE") {
+            fail(where, "alphaMode '" + m.alphaMode + "' is not OPAQUE, MASK or BLEND");
+        }
+        md.alpha = masked ? alpha_mode::mask : alpha_mode::opaque;
+
+        int const texture = pbr.baseColorTexture.index;
+        if (texture >= 0 || texture < -1) {
+            std::string const twhere = where + ".pbrMetallicRoughness.baseColorTexture";
+            if (std::size_t(texture) >= model_.textures.size())
+                fail(twhere, "texture " + std::to_string(texture) + " does not exist (" +
+                                 std::to_string(model_.textures.size()) + " textures)");
+            if (pbr.baseColorTexture.texCoord < 0) fail(twhere, "texCoord is negative");
+            int const source = model_.textures[std::size_t(texture)].source;
+            if (source < 0 || std::size_t(source) >= model_.images.size())
+                fail(index_name("textures", texture), "has no image source this loader reads (source " +
+                                                          std::to_string(source) + ", " +
+                                                          std::to_string(model_.images.size()) + " images)");
+            // The factor's alpha multiplies the texture's: masks compare the product.
+            md.image = image(source, masked ? factor[3] : 1.0);
+        } else if (masked) {
+            // No texture: the factor's alpha alone decides, through a 1×1 image.
+            md.image = image(-1, factor[3]);
+        }
+        int const id = guarded(where, [&] { return s_.add_material(std::move(md)); });
+        slot = id;
+        return id;
+    }
+
+    // Scene image of glTF image `index` with alpha scaled by `alpha` (index -1: one white texel).
+    int image(int index, double alpha) {
+        auto const key = std::make_pair(index, alpha);
+        if (auto it = images_.find(key); it != images_.end()) return it->second;
+        image_data img;
+        if (index < 0) {
+            img.source = name_;
+            img.width = img.height = 1;
+            img.texels = {vec4<float>(1.0f, 1.0f, 1.0f, 1.0f)};
+        } else {
+            img = decoded_image(index);
+        }
+        if (alpha != 1.0)
+            for (auto& t : img.texels) t.w = float(double(t.w) * alpha);
+        std::string const where = index < 0 ? std::string("materials") : index_name("images", index);
+        int const id = guarded(where, [&] { return s_.add_image(std::move(img)); });
+        images_.emplace(key, id);
+        return id;
+    }
+
+    // glTF image `index` as linear RGBA.
+    image_data decoded_image(int index) const {
+        std::string const where = index_name("images", index);
+        tinygltf::Image const& im = model_.images[std::size_t(index)];
+        image_data out;
+        if (!im.uri.empty()) {
+            fs::path const path = file_.parent_path() / decode_uri(im.uri);
+            try {
+                out = r_.load_image(path);
+            } catch (scene_error const& e) {
+                fail(where, "'" + im.uri + "': " + e.what());
+            }
+            for (auto& t : out.texels) t = vec4<float>(srgb_to_linear(t.x), srgb_to_linear(t.y), srgb_to_linear(t.z), t.w);
+            return out;
+        }
+        if (im.image.empty()) fail(where, "has no image data that could be decoded");
+        if (im.width <= 0 || im.height <= 0 || im.component < 1 || im.component > 4 || (im.bits != 8 && im.bits != 16))
+            fail(where, "decoded image has an unsupported layout (" + std::to_string(im.width) + "x" +
+                            std::to_string(im.height) + ", " + std::to_string(im.component) + " channels, " +
+                            std::to_string(im.bits) + " bits)");
+        std::size_t const channels = std::size_t(im.component), bytes = std::size_t(im.bits / 8);
+        std::size_t const texels = std::size_t(im.width) * std::size_t(im.height);
+        if (im.image.size() != texels * channels * bytes) fail(where, "decoded image has the wrong number of bytes");
+        std::array<float, 256> srgb8{};
+        for (std::size_t v = 0; v < 256; ++v) srgb8[v] = srgb_to_linear(double(v) / 255.0);
+        auto const value = [&](std::size_t i, std::size_t c) {
+            unsigned char const* p = im.image.data() + (i * channels + c) * bytes;
+            if (bytes == 1) return double(p[0]) / 255.0;
+            std::uint16_t v;
+            std::memcpy(&v, p, 2);
+            return double(v) / 65535.0;
+        };
+        auto const colour = [&](std::size_t i, std::size_t c) {
+            if (bytes == 1) return srgb8[im.image[i * channels + c]];
+            return srgb_to_linear(value(i, c));
+        };
+        out.source = name_ + " " + where;
+        out.width = im.width;
+        out.height = im.height;
+        out.texels.resize(texels);
+        for (std::size_t i = 0; i < texels; ++i) {
+            if (channels >= 3)
+                out.texels[i] = vec4<float>(colour(i, 0), colour(i, 1), colour(i, 2),
+                                            channels == 4 ? float(value(i, 3)) : 1.0f);
+            else
+                out.texels[i] = vec4<float>(colour(i, 0), colour(i, 0), colour(i, 0),
+                                            channels == 2 ? float(value(i, 1)) : 1.0f);
+        }
+        return out;
+    }
+
+    tinygltf::Model const& model_;
+    fs::path file_;
+    std::string name_;
+    scene& s_;
+    registry const& r_;
+    std::vector<std::optional<int>> materials_;
+    std::vector<std::optional<std::vector<std::uint32_t>>> meshes_;
+    std::map<std::pair<int, double>, int> images_;
+};
+
+bool is_binary_gltf(fs::path const& file) {
+    std::ifstream in(file, std::ios::binary);
+    char magic[4] = {};
+    in.read(magic, 4);
+    return in.gcount() == 4 && std::memcmp(magic, "glTF", 4) == 0;
+}
+
+} // namespace
+
+node_id load_gltf(scene& s, fs::path const& file, node_id parent, registry const& r) {
+    std::error_code ec;
+    if (!fs::is_regular_file(file, ec)) throw scene_error(file.string(), "", "no such file");
+    tinygltf::Model model;
+    std::string err, warn;
+    bool loaded = false;
+    try {
+        tinygltf::TinyGLTF loader;
+        loader.SetImageLoader(decode_embedded_image, nullptr);
+        loaded = is_binary_gltf(file) ? loader.LoadBinaryFromFile(&model, &err, &warn, file.string())
+                                      : loader.LoadASCIIFromFile(&model, &err, &warn, file.string());
+    } catch (std::exception const& e) {
+        throw scene_error(file.string(), "", std::string("tinygltf: ") + e.what());
+    }
+    if (!loaded) throw scene_error(file.string(), "", tidy(err.empty() ? warn : err));
+    scene::mark const mark = s.make_mark();
+    try {
+        return converter(model, file, s, r).run(parent);
+    } catch (...) {
+        s.roll_back(mark);
+        throw;
+    }
+}
+
+void register_gltf_plugin(registry& r) {
+    r.add_loader(".gltf", "gltf", "glTF 2.0 scenes: node hierarchy, shared meshes, materials with alpha masks, cameras",
+                 load_gltf);
+    r.add_loader(".glb", "gltf", "binary glTF 2.0 scenes (as .gltf)", load_gltf);
+}
+
+} // namespace canopy
