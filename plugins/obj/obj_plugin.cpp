@@ -1,0 +1,477 @@
+// canopy.plugins.obj — implementation: the OBJ and MTL parsers (see obj_plugin.cppm for the
+// statements read and the errors reported). Everything is linear in the input: no allocation is
+// sized by a number read from the file.
+module;
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <utility>
+#include <vector>
+module canopy.plugins.obj;
+
+namespace canopy {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr std::uint32_t absent = ~std::uint32_t(0);
+
+[[noreturn]] void fail(std::string const& file, std::size_t line, std::string const& problem) {
+    throw scene_error(file, line ? std::to_string(line) : std::string(), problem);
+}
+
+bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+std::string_view trim(std::string_view s) {
+    while (!s.empty() && is_space(s.front())) s.remove_prefix(1);
+    while (!s.empty() && is_space(s.back())) s.remove_suffix(1);
+    return s;
+}
+
+bool equals_ignoring_case(std::string_view a, std::string_view b) {
+    return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
+               return std::tolower(static_cast<unsigned char>(x)) == std::tolower(static_cast<unsigned char>(y));
+           });
+}
+
+// Splits a line into whitespace-separated tokens (views into the line).
+void split(std::string_view line, std::vector<std::string_view>& out) {
+    out.clear();
+    std::size_t i = 0;
+    while (i < line.size()) {
+        while (i < line.size() && is_space(line[i])) ++i;
+        std::size_t const start = i;
+        while (i < line.size() && !is_space(line[i])) ++i;
+        if (i > start) out.push_back(line.substr(start, i - start));
+    }
+}
+
+// The text after a token, trimmed (names and paths may hold spaces).
+std::string_view rest_after(std::string_view line, std::string_view token) {
+    return trim(line.substr(std::size_t(token.data() + token.size() - line.data())));
+}
+
+std::string_view rest_from(std::string_view line, std::string_view token) {
+    return trim(line.substr(std::size_t(token.data() - line.data())));
+}
+
+// Calls f(line number, line without its comment) for each line; refuses text that is not
+// ASCII / UTF-8 (a UTF-16 byte-order mark, NUL bytes).
+template <typename F>
+void for_each_line(std::string_view text, std::string const& file, F&& f) {
+    if (text.size() >= 2 && ((text[0] == '\xFE' && text[1] == '\xFF') || (text[0] == '\xFF' && text[1] == '\xFE')))
+        fail(file, 0, "is UTF-16 text; only ASCII or UTF-8 is read");
+    if (text.starts_with("\xEF\xBB\xBF")) text.remove_prefix(3);
+    std::size_t line = 0, pos = 0;
+    while (pos < text.size()) {
+        std::size_t const end = std::min(text.find('\n', pos), text.size());
+        ++line;
+        std::string_view content = text.substr(pos, end - pos);
+        if (content.find('\0') != std::string_view::npos) fail(file, line, "holds a NUL byte: not a text file");
+        if (auto const hash = content.find('#'); hash != std::string_view::npos) content = content.substr(0, hash);
+        f(line, content);
+        pos = end + 1;
+    }
+}
+
+float parse_float(std::string_view token, std::string const& file, std::size_t line) {
+    std::string_view t = token;
+    if (t.size() > 1 && t[0] == '+' && t[1] != '+' && t[1] != '-') t.remove_prefix(1);
+    double value = 0.0;
+    auto const [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
+    if (ec == std::errc::result_out_of_range)
+        fail(file, line, "number '" + std::string(token) + "' is out of range");
+    if (ec != std::errc{} || end != t.data() + t.size()) fail(file, line, "bad number '" + std::string(token) + "'");
+    if (!std::isfinite(value)) fail(file, line, "number '" + std::string(token) + "' is not finite");
+    if (std::abs(value) > double(std::numeric_limits<float>::max()))
+        fail(file, line, "number '" + std::string(token) + "' is out of range for a float");
+    return float(value);
+}
+
+// Reads `count_min`..`count_max` numbers from tokens[1..].
+template <std::size_t N>
+std::size_t parse_floats(std::vector<std::string_view> const& tokens, std::size_t count_min, std::array<float, N>& out,
+                         std::string const& file, std::size_t line, char const* expected) {
+    std::size_t const n = tokens.size() - 1;
+    if (n < count_min || n > N)
+        fail(file, line, "'" + std::string(tokens[0]) + "' needs " + expected + ", found " + std::to_string(n) + " values");
+    for (std::size_t k = 0; k < n; ++k) out[k] = parse_float(tokens[k + 1], file, line);
+    return n;
+}
+
+// A 1-based (or negative, relative) OBJ index resolved against `count` elements so far.
+std::uint32_t resolve_index(std::string_view token, std::string_view whole, std::size_t count, char const* what,
+                            char const* plural, std::string const& file, std::size_t line) {
+    std::string_view t = token;
+    if (t.size() > 1 && t[0] == '+' && t[1] != '-') t.remove_prefix(1);
+    std::int64_t value = 0;
+    auto const [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
+    if (t.empty() || ec != std::errc{} || end != t.data() + t.size())
+        fail(file, line, std::string("bad ") + what + " index '" + std::string(token) + "' in corner '" + std::string(whole) + "'");
+    if (value == 0) fail(file, line, std::string(what) + " index 0 is not valid (OBJ indices start at 1)");
+    auto const n = std::int64_t(count);
+    std::int64_t const resolved = value > 0 ? value - 1 : n + value;
+    if (resolved < 0 || resolved >= n)
+        fail(file, line, std::string(what) + " index " + std::to_string(value) + " is out of range (" + std::to_string(count) +
+                             " " + plural + " so far)");
+    return std::uint32_t(resolved);
+}
+
+struct corner {
+    std::uint32_t v = absent, vt = absent, vn = absent;
+};
+
+// The faces of one material, fanned into triangles, in file order.
+struct bucket {
+    std::string material;
+    std::vector<std::array<corner, 3>> triangles;
+    bool any_uv = false, any_normal = false;
+};
+
+std::string read_text_file(fs::path const& p, std::string const& asking_file, std::size_t line, char const* what) {
+    std::error_code ec;
+    auto const st = fs::status(p, ec);
+    if (!fs::exists(st)) fail(asking_file, line, std::string(what) + " '" + p.string() + "' not found");
+    if (!fs::is_regular_file(st)) fail(asking_file, line, std::string(what) + " '" + p.string() + "' is not a regular file");
+    std::ifstream in(p, std::ios::binary);
+    std::ostringstream content;
+    if (in) content << in.rdbuf();
+    if (!in || in.bad()) fail(asking_file, line, std::string(what) + " '" + p.string() + "' cannot be read");
+    return std::move(content).str();
+}
+
+// A texture statement's file, after its options. Options that change the lookup are refused.
+std::string texture_path(std::string_view line, std::vector<std::string_view> const& tokens, std::string const& file,
+                         std::size_t line_number) {
+    std::size_t k = 1;
+    while (k < tokens.size() && tokens[k].size() > 1 && tokens[k][0] == '-') {
+        std::string_view const option = tokens[k];
+        std::size_t arguments = 0;
+        if (option == "-blendu" || option == "-blendv" || option == "-cc" || option == "-texres" || option == "-bm" ||
+            option == "-boost")
+            arguments = 1;
+        else if (option == "-mm")
+            arguments = 2;
+        else if (option == "-o" || option == "-s" || option == "-t" || option == "-clamp" || option == "-imfchan")
+            fail(file, line_number, "texture option " + std::string(option) + " is not supported");
+        else
+            fail(file, line_number, "unknown texture option " + std::string(option));
+        if (k + arguments >= tokens.size())
+            fail(file, line_number, "texture option " + std::string(option) + " needs " + std::to_string(arguments) +
+                                        " value" + (arguments == 1 ? "" : "s") + " and a file name");
+        k += 1 + arguments;
+    }
+    if (k >= tokens.size()) fail(file, line_number, "'" + std::string(tokens[0]) + "' needs a file name");
+    std::string path(rest_from(line, tokens[k]));
+    std::replace(path.begin(), path.end(), '\\', '/');
+    return path;
+}
+
+// The material's texture: map_Kd, with map_d's red channel as alpha when given.
+std::optional<image_data> material_texture(mtl_material const& m, fs::path const& mtl_file, registry const& r,
+                                           bool& mask) {
+    auto const load = [&](std::string const& relative, std::size_t line) {
+        try {
+            return r.load_image(mtl_file.parent_path() / fs::path(relative));
+        } catch (scene_error const& e) {
+            fail(mtl_file.string(), line, "texture '" + relative + "': " + e.what());
+        }
+    };
+    std::optional<image_data> colour, alpha;
+    if (!m.colour_texture.empty()) colour = load(m.colour_texture, m.colour_texture_line);
+    if (!m.alpha_texture.empty()) alpha = load(m.alpha_texture, m.alpha_texture_line);
+    auto const valid = [&](image_data const& img, std::size_t line) {
+        if (img.width <= 0 || img.height <= 0 || img.texels.size() != std::size_t(img.width) * std::size_t(img.height))
+            fail(mtl_file.string(), line, "texture '" + img.source + "' has no texels");
+    };
+    if (colour) valid(*colour, m.colour_texture_line);
+    if (alpha) valid(*alpha, m.alpha_texture_line);
+    if (!alpha) {
+        if (colour)
+            mask = std::any_of(colour->texels.begin(), colour->texels.end(), [](vec4<float> t) { return t.w < 1.0f; });
+        return colour;
+    }
+    mask = true;
+    image_data out;
+    if (colour) {
+        out = std::move(*colour);
+    } else {
+        out.source = alpha->source;
+        out.width = alpha->width;
+        out.height = alpha->height;
+        out.texels.assign(alpha->texels.size(), vec4<float>{1.0f, 1.0f, 1.0f, 1.0f});
+    }
+    // Nearest resampling of the alpha image onto the colour image's texels.
+    for (std::int64_t y = 0; y < out.height; ++y)
+        for (std::int64_t x = 0; x < out.width; ++x) {
+            std::int64_t const ax = x * alpha->width / out.width, ay = y * alpha->height / out.height;
+            out.texels[std::size_t(y * out.width + x)].w = alpha->texels[std::size_t(ay * alpha->width + ax)].x;
+        }
+    out.source += " (alpha: " + alpha->source + ")";
+    return out;
+}
+
+vec3<float> geometric_normal(vec3<float> a, vec3<float> b, vec3<float> c) {
+    vec3<float> const n = cross(b - a, c - a);
+    float const len = std::sqrt(dot(n, n));
+    return len > 0.0f && std::isfinite(len) ? n / len : vec3<float>{0.0f, 0.0f, 0.0f};
+}
+
+class obj_parser {
+public:
+    obj_parser(std::string const& file, registry const* r, scene& s) : file_(file), r_(r), s_(s) {}
+
+    node_id run(std::string_view text, node_id parent) {
+        std::vector<std::string_view> tokens;
+        std::vector<corner> face;
+        for_each_line(text, file_, [&](std::size_t line, std::string_view content) {
+            split(content, tokens);
+            if (tokens.empty()) return;
+            std::string_view const op = tokens[0];
+            if (op == "v") {
+                std::array<float, 7> c{};
+                parse_floats(tokens, 3, c, file_, line, "3 to 7 numbers (x y z [w] or x y z r g b [a])");
+                if (positions_.size() >= absent - 1) fail(file_, line, "too many vertices");
+                positions_.push_back({c[0], c[1], c[2]});
+            } else if (op == "vt") {
+                std::array<float, 3> c{};
+                parse_floats(tokens, 1, c, file_, line, "1 to 3 numbers (u [v [w]])");
+                if (uvs_.size() >= absent - 1) fail(file_, line, "too many texture coordinates");
+                uvs_.push_back({c[0], 1.0f - c[1]});
+            } else if (op == "vn") {
+                std::array<float, 3> c{};
+                parse_floats(tokens, 3, c, file_, line, "3 numbers (x y z)");
+                if (normals_.size() >= absent - 1) fail(file_, line, "too many normals");
+                normals_.push_back({c[0], c[1], c[2]});
+            } else if (op == "f") {
+                read_face(tokens, face, line);
+            } else if (op == "usemtl") {
+                use_material(std::string(rest_after(content, op)));
+            } else if (op == "mtllib") {
+                read_libraries(content, tokens, line);
+            }
+        });
+        return build(parent);
+    }
+
+private:
+    void use_material(std::string name) {
+        auto [it, inserted] = bucket_of_.try_emplace(name, buckets_.size());
+        if (inserted) buckets_.push_back({std::move(name), {}, false, false});
+        current_ = it->second;
+    }
+
+    void read_face(std::vector<std::string_view> const& tokens, std::vector<corner>& face, std::size_t line) {
+        if (tokens.size() < 4)
+            fail(file_, line, "face has " + std::to_string(tokens.size() - 1) + " corners; at least 3 are needed");
+        face.clear();
+        for (std::size_t k = 1; k < tokens.size(); ++k) {
+            std::string_view const token = tokens[k];
+            std::size_t const slash1 = token.find('/');
+            std::size_t const slash2 = slash1 == std::string_view::npos ? slash1 : token.find('/', slash1 + 1);
+            if (slash2 != std::string_view::npos && token.find('/', slash2 + 1) != std::string_view::npos)
+                fail(file_, line, "corner '" + std::string(token) + "' has more than three parts");
+            corner c;
+            c.v = resolve_index(token.substr(0, slash1), token, positions_.size(), "vertex", "vertices", file_, line);
+            if (slash1 != std::string_view::npos) {
+                std::string_view const vt = token.substr(slash1 + 1, slash2 == std::string_view::npos ? std::string_view::npos
+                                                                                                      : slash2 - slash1 - 1);
+                if (!vt.empty()) c.vt = resolve_index(vt, token, uvs_.size(), "texture coordinate", "texture coordinates", file_, line);
+                else if (slash2 == std::string_view::npos)
+                    fail(file_, line, "corner '" + std::string(token) + "' has an empty texture coordinate index");
+                if (slash2 != std::string_view::npos)
+                    c.vn = resolve_index(token.substr(slash2 + 1), token, normals_.size(), "normal", "normals", file_, line);
+            }
+            if (!face.empty() && ((c.vt == absent) != (face[0].vt == absent) || (c.vn == absent) != (face[0].vn == absent)))
+                fail(file_, line, "corner '" + std::string(token) + "' has another form than the face's first corner '" +
+                                      std::string(tokens[1]) + "'");
+            face.push_back(c);
+        }
+        if (current_ == absent) use_material({});
+        bucket& b = buckets_[current_];
+        b.any_uv = b.any_uv || face[0].vt != absent;
+        b.any_normal = b.any_normal || face[0].vn != absent;
+        for (std::size_t k = 1; k + 1 < face.size(); ++k) b.triangles.push_back({face[0], face[k], face[k + 1]});
+    }
+
+    void read_libraries(std::string_view content, std::vector<std::string_view> const& tokens, std::size_t line) {
+        if (tokens.size() < 2) fail(file_, line, "'mtllib' needs a file name");
+        fs::path const folder = fs::path(file_).parent_path();
+        std::vector<std::string> names;
+        std::string whole(rest_after(content, tokens[0]));
+        std::replace(whole.begin(), whole.end(), '\\', '/');
+        std::error_code ec;
+        if (tokens.size() > 2 && fs::is_regular_file(folder / whole, ec)) names.push_back(whole);
+        else
+            for (std::size_t k = 1; k < tokens.size(); ++k) {
+                std::string name(tokens[k]);
+                std::replace(name.begin(), name.end(), '\\', '/');
+                names.push_back(std::move(name));
+            }
+        for (auto const& name : names) {
+            fs::path const library = folder / fs::path(name);
+            std::string const text = read_text_file(library, file_, line, "material library");
+            for (auto& m : parse_mtl(text, library.string())) {
+                std::string key = m.name;
+                materials_.try_emplace(std::move(key), std::move(m), library); // the first definition wins
+            }
+        }
+    }
+
+    int material_index(std::string const& name) {
+        auto it = materials_.find(name);
+        if (it == materials_.end()) return -1;
+        auto const& [m, library] = it->second;
+        material_data md;
+        md.name = m.name;
+        if (m.colour) md.colour = *m.colour;
+        else if (!m.colour_texture.empty()) md.colour = {1.0f, 1.0f, 1.0f};
+        if (r_ != nullptr) {
+            bool mask = false;
+            if (auto img = material_texture(m, library, *r_, mask)) {
+                md.image = s_.add_image(std::move(*img));
+                if (mask) {
+                    md.alpha = alpha_mode::mask;
+                    md.alpha_cutoff = 0.5f;
+                }
+            }
+        }
+        return s_.add_material(std::move(md));
+    }
+
+    node_id build(node_id parent) {
+        std::string const stem = fs::path(file_).stem().string();
+        node_id const group = s_.add_group(parent, stem);
+        std::vector<std::uint32_t> local(positions_.size(), absent);
+        for (bucket& b : buckets_) {
+            mesh_data m;
+            m.name = b.material.empty() && bucket_of_.size() == 1 ? stem : b.material;
+            m.source = file_;
+            m.triangles.reserve(b.triangles.size());
+            for (auto const& t : b.triangles) {
+                std::array<std::uint32_t, 3> tri{};
+                for (std::size_t k = 0; k < 3; ++k) {
+                    std::uint32_t& l = local[t[k].v];
+                    if (l == absent) {
+                        l = std::uint32_t(m.positions.size());
+                        m.positions.push_back(positions_[t[k].v]);
+                    }
+                    tri[k] = l;
+                }
+                m.triangles.push_back(tri);
+                if (b.any_uv) {
+                    std::array<vec2<float>, 3> uv{};
+                    for (std::size_t k = 0; k < 3; ++k)
+                        if (t[k].vt != absent) uv[k] = uvs_[t[k].vt];
+                    m.uvs.push_back(uv);
+                }
+                if (b.any_normal) {
+                    std::array<vec3<float>, 3> n{};
+                    vec3<float> const g = t[0].vn == absent ? geometric_normal(positions_[t[0].v], positions_[t[1].v],
+                                                                               positions_[t[2].v])
+                                                            : vec3<float>{};
+                    for (std::size_t k = 0; k < 3; ++k) n[k] = t[k].vn != absent ? normals_[t[k].vn] : g;
+                    m.normals.push_back(n);
+                }
+            }
+            for (auto const& t : b.triangles)
+                for (auto const& c : t) local[c.v] = absent;
+            b.triangles = {};
+            m.material = material_index(b.material);
+            std::string const name = m.name;
+            std::uint32_t const mesh = s_.add_mesh(std::move(m));
+            s_.add_mesh_node(group, mesh, name);
+        }
+        return group;
+    }
+
+    std::string const& file_;
+    registry const* r_;
+    scene& s_;
+    std::vector<vec3<float>> positions_, normals_;
+    std::vector<vec2<float>> uvs_;
+    std::vector<bucket> buckets_;
+    std::map<std::string, std::size_t> bucket_of_;
+    std::size_t current_ = absent;
+    std::map<std::string, std::pair<mtl_material, fs::path>> materials_;
+};
+
+} // namespace
+
+std::vector<mtl_material> parse_mtl(std::string_view text, std::string const& file_name) {
+    std::vector<mtl_material> out;
+    std::vector<std::string_view> tokens;
+    for_each_line(text, file_name, [&](std::size_t line, std::string_view content) {
+        split(content, tokens);
+        if (tokens.empty()) return;
+        std::string_view const op = tokens[0];
+        if (equals_ignoring_case(op, "newmtl")) {
+            out.push_back({});
+            out.back().name = std::string(rest_after(content, op));
+            out.back().line = line;
+            return;
+        }
+        bool const kd = equals_ignoring_case(op, "Kd"), map_kd = equals_ignoring_case(op, "map_Kd"),
+                   map_d = equals_ignoring_case(op, "map_d");
+        if (!kd && !map_kd && !map_d) return;
+        if (out.empty()) fail(file_name, line, "'" + std::string(op) + "' before any 'newmtl'");
+        mtl_material& m = out.back();
+        if (kd) {
+            if (tokens.size() > 1 && (equals_ignoring_case(tokens[1], "spectral") || equals_ignoring_case(tokens[1], "xyz")))
+                fail(file_name, line, "'Kd " + std::string(tokens[1]) + "' is not supported; give r g b");
+            std::array<float, 3> c{};
+            std::size_t const n = parse_floats(tokens, 1, c, file_name, line, "1 or 3 numbers (r [g b])");
+            if (n == 2) fail(file_name, line, "'Kd' needs 1 or 3 numbers (r [g b]), found 2 values");
+            if (n == 1) c[1] = c[2] = c[0];
+            if (c[0] < 0.0f || c[1] < 0.0f || c[2] < 0.0f) fail(file_name, line, "colour has a negative component");
+            m.colour = vec3<float>{c[0], c[1], c[2]};
+        } else if (map_kd) {
+            m.colour_texture = texture_path(content, tokens, file_name, line);
+            m.colour_texture_line = line;
+        } else {
+            m.alpha_texture = texture_path(content, tokens, file_name, line);
+            m.alpha_texture_line = line;
+        }
+    });
+    return out;
+}
+
+node_id parse_obj(std::string_view text, std::string const& file_name, registry const* r, scene& s, node_id parent) {
+    auto const mark = s.make_mark();
+    try {
+        return obj_parser(file_name, r, s).run(text, parent);
+    } catch (scene_error const& e) {
+        s.roll_back(mark);
+        if (!e.file().empty()) throw;
+        throw scene_error(file_name, e.where(), e.problem());
+    } catch (...) {
+        s.roll_back(mark);
+        throw;
+    }
+}
+
+node_id load_obj(scene& s, std::filesystem::path const& file, node_id parent, registry const& r) {
+    std::string const text = read_text_file(file, file.string(), 0, "file");
+    return parse_obj(text, file.string(), &r, s, parent);
+}
+
+void register_obj_plugin(registry& r) {
+    r.add_loader(".obj", "obj", "Wavefront OBJ + MTL (Canopy's reader: polygons, materials, alpha masks)", load_obj);
+}
+
+} // namespace canopy
