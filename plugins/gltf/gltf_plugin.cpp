@@ -511,13 +511,13 @@ private:
         // Material, and the texture coordinates its base colour texture reads.
         int uv_set = 0;
         bool uv_required = false;
-        if (p.material >= 0 || p.material < -1) {
+        bool const has_material = p.material >= 0 || p.material < -1;
+        if (has_material) {
             if (std::size_t(p.material) >= model_.materials.size())
                 fail(where, "material " + std::to_string(p.material) + " does not exist (" +
                                 std::to_string(model_.materials.size()) + " materials)");
-            md.material = material(p.material);
             auto const& info = model_.materials[std::size_t(p.material)].pbrMetallicRoughness.baseColorTexture;
-            if (info.index >= 0) {
+            if (info.index >= 0 || info.index < -1) {
                 uv_set = info.texCoord;
                 uv_required = true;
             }
@@ -526,6 +526,7 @@ private:
         int const uv = accessor_index(p.attributes, uv_key, where);
         if (uv < 0 && uv_required)
             fail(where, "its material's base colour texture reads " + uv_key + ", which the primitive does not have");
+        if (has_material) md.material = material(p.material);
         if (uv >= 0) {
             std::vector<double> const st = read_attribute(uv, uv_key, 2, true, vertices, where);
             md.uvs.reserve(md.triangles.size());

@@ -1,0 +1,649 @@
+// Tests of the glTF plugin (canopy.plugins.gltf). Every file is written here: JSON text plus a
+// binary buffer (an external .bin, a base64 data: URI, or a hand-assembled .glb), and a PNG
+// written through canopy.image_io. Expected values are worked out by hand from the numbers put in
+// the file: world positions from the node transforms, triangles from the glTF rules for strips
+// and fans, texels from the sRGB formula, and hits from rays aimed at chosen texture quadrants.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <map>
+#include <string>
+#include <vector>
+#include <unistd.h>
+
+import canopy.scene;
+import canopy.image_io;
+import canopy.plugins.oiio;
+import canopy.plugins.gltf;
+
+namespace {
+
+namespace fs = std::filesystem;
+using canopy::vec3;
+
+constexpr float inf = std::numeric_limits<float>::infinity();
+
+// A folder of its own for each test case, removed afterwards.
+struct temp_folder {
+    fs::path path;
+    temp_folder() : path(fs::temp_directory_path() / ("canopy_gltf_test_" + std::to_string(::getpid()))) {
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~temp_folder() {
+        std::error_code ignored;
+        fs::remove_all(path, ignored);
+    }
+    temp_folder(temp_folder const&) = delete;
+    temp_folder& operator=(temp_folder const&) = delete;
+};
+
+canopy::registry const& plugins() {
+    static canopy::registry const r = [] {
+        canopy::registry reg;
+        canopy::register_oiio_plugin(reg);
+        canopy::register_gltf_plugin(reg);
+        return reg;
+    }();
+    return r;
+}
+
+void write_text(fs::path const& file, std::string const& text) {
+    std::ofstream out(file, std::ios::binary);
+    out << text;
+}
+
+std::vector<unsigned char> read_bytes(fs::path const& file) {
+    std::ifstream in(file, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+std::string base64(std::vector<unsigned char> const& data) {
+    static char const digits[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string out;
+    for (std::size_t i = 0; i < data.size(); i += 3) {
+        std::uint32_t v = std::uint32_t(data[i]) << 16;
+        if (i + 1 < data.size()) v |= std::uint32_t(data[i + 1]) << 8;
+        if (i + 2 < data.size()) v |= data[i + 2];
+        out += digits[(v >> 18) & 63];
+        out += digits[(v >> 12) & 63];
+        out += i + 1 < data.size() ? digits[(v >> 6) & 63] : '=';
+        out += i + 2 < data.size() ? digits[v & 63] : '=';
+    }
+    return out;
+}
+
+// Binary data and the bufferViews / accessors that describe it (all in buffer 0).
+struct gltf_builder {
+    std::vector<unsigned char> bin;
+    std::vector<std::string> views, accessors;
+
+    int add_view(void const* data, std::size_t bytes) {
+        while (bin.size() % 4 != 0) bin.push_back(0);
+        std::size_t const offset = bin.size();
+        auto const* p = static_cast<unsigned char const*>(data);
+        bin.insert(bin.end(), p, p + bytes);
+        views.push_back("{\"buffer\": 0, \"byteOffset\": " + std::to_string(offset) +
+                        ", \"byteLength\": " + std::to_string(bytes) + "}");
+        return int(views.size() - 1);
+    }
+    template <typename T>
+    int add(std::vector<T> const& values, int component_type, char const* type, std::size_t components,
+            bool normalized = false) {
+        int const view = add_view(values.data(), values.size() * sizeof(T));
+        accessors.push_back("{\"bufferView\": " + std::to_string(view) + ", \"componentType\": " +
+                            std::to_string(component_type) + ", \"count\": " +
+                            std::to_string(values.size() / components) + ", \"type\": \"" + type + "\"" +
+                            (normalized ? ", \"normalized\": true" : "") + "}");
+        return int(accessors.size() - 1);
+    }
+    int vec3s(std::vector<float> const& v) { return add(v, 5126, "VEC3", 3); }
+    int vec2s(std::vector<float> const& v) { return add(v, 5126, "VEC2", 2); }
+
+    // The whole document; `buffer` is the buffers entry, `rest` the other top-level members.
+    std::string document(std::string const& buffer, std::string const& rest) const {
+        auto const join = [](std::vector<std::string> const& items) {
+            std::string s;
+            for (auto const& i : items) s += (s.empty() ? "" : ", ") + i;
+            return s;
+        };
+        return "{\"asset\": {\"version\": \"2.0\"}, \"buffers\": [" + buffer + "], \"bufferViews\": [" + join(views) +
+               "], \"accessors\": [" + join(accessors) + "], " + rest + "}";
+    }
+    std::string external_buffer(fs::path const& bin_file) const {
+        std::ofstream(bin_file, std::ios::binary).write(reinterpret_cast<char const*>(bin.data()), std::streamsize(bin.size()));
+        return "{\"uri\": \"" + bin_file.filename().string() + "\", \"byteLength\": " + std::to_string(bin.size()) + "}";
+    }
+    std::string embedded_buffer() const {
+        return "{\"uri\": \"data:application/octet-stream;base64," + base64(bin) +
+               "\", \"byteLength\": " + std::to_string(bin.size()) + "}";
+    }
+};
+
+// .glb: 12-byte header, a JSON chunk (space-padded), a BIN chunk (zero-padded).
+void write_glb(fs::path const& file, std::string json, std::vector<unsigned char> bin) {
+    while (json.size() % 4 != 0) json += ' ';
+    while (bin.size() % 4 != 0) bin.push_back(0);
+    auto const u32 = [](std::vector<unsigned char>& out, std::uint32_t v) {
+        for (int k = 0; k < 4; ++k) out.push_back(static_cast<unsigned char>(v >> (8 * k)));
+    };
+    std::vector<unsigned char> out{'g', 'l', 'T', 'F'};
+    u32(out, 2);
+    u32(out, std::uint32_t(12 + 8 + json.size() + 8 + bin.size()));
+    u32(out, std::uint32_t(json.size()));
+    out.insert(out.end(), {'J', 'S', 'O', 'N'});
+    out.insert(out.end(), json.begin(), json.end());
+    u32(out, std::uint32_t(bin.size()));
+    out.insert(out.end(), {'B', 'I', 'N', 0});
+    out.insert(out.end(), bin.begin(), bin.end());
+    std::ofstream(file, std::ios::binary).write(reinterpret_cast<char const*>(out.data()), std::streamsize(out.size()));
+}
+
+// The mask texture: 4×4, the top-left 2×2 quadrant opaque with colour (1, 0.2, 0) (sRGB-encoded),
+// the rest fully transparent.
+void write_mask_png(fs::path const& file) {
+    canopy::rgba_image img;
+    img.width = img.height = 4;
+    img.pixels.assign(4 * 16, 0.0f);
+    for (int y = 0; y < 2; ++y)
+        for (int x = 0; x < 2; ++x) {
+            float* p = img.at(x, y);
+            p[0] = 1.0f, p[1] = 0.2f, p[2] = 0.0f, p[3] = 1.0f;
+        }
+    canopy::write_image(file, img);
+}
+
+double srgb_to_linear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
+
+// ---- the instancing scene ---------------------------------------------------------------------
+//
+// meshes[0] "backdrop_quad": the square [-1, 1]² at z = 0, six unindexed vertices, normals +Z,
+//           opaque red material 0; used by nodes 1, 4 and 5.
+// meshes[1] "masked_quad": the same square, u16 indices, uv (0, 0) at the top-left corner
+//           (-1, 1); masked material 1 with the mask texture; used by nodes 0 and 3.
+// meshes[2] "two_parts": a TRIANGLE_STRIP with u8 indices and a TRIANGLE_FAN without indices,
+//           normalized u16 texture coordinates; used by node 6.
+// Nodes (scene 0 = [0, 1, 2, 6, 7]):
+//   0 masked_1   T(0, 0, -5)
+//   1 backdrop   T(0, 0, -10) S(4, 4, 1)
+//   2 group      T(10, 0, 0) R(90° about +Y: (x, y, z) → (z, y, -x)), children 3, 4
+//   3 masked_2   T(0, 0, -5)                            → world (x, y) ↦ (5, y, -x)
+//   4 nested     matrix T(0, 0, -8), child 5            → world (x, y) ↦ (2, y, -x)
+//   5 deep       T(0, 0, -1) S(0.5)                     → world (x, y) ↦ (1, y/2, -x/2)
+//   6 parts      T(0, -20, 0)
+//   7 rig        T(0, 10, 0), child 8
+//   8 eye        camera 0 (yfov 0.8), T(1, 2, 3) R(90° about +Y) → eye (1, 12, 3) looking along -X
+struct instancing_scene {
+    gltf_builder b;
+    std::string rest;
+
+    instancing_scene() {
+        std::vector<float> const square{-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, -1, 0, 1, 1, 0, -1, 1, 0};
+        std::vector<float> normals;
+        for (int k = 0; k < 6; ++k) normals.insert(normals.end(), {0, 0, 1});
+        int const a_pos = b.vec3s(square);
+        int const a_nrm = b.vec3s(normals);
+        int const b_pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0});
+        int const b_uv = b.vec2s({0, 1, 1, 1, 1, 0, 0, 0});
+        int const b_idx = b.add(std::vector<std::uint16_t>{0, 1, 2, 0, 2, 3}, 5123, "SCALAR", 1);
+        int const c_pos = b.vec3s({0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0});
+        int const c_idx = b.add(std::vector<std::uint8_t>{0, 1, 2, 3}, 5121, "SCALAR", 1);
+        int const c_fan = b.vec3s({0, 0, 1, 1, 0, 1, 1, 1, 1, 0, 1, 1});
+        int const c_uv = b.add(std::vector<std::uint16_t>{0, 0, 65535, 0, 65535, 32768, 0, 65535}, 5123, "VEC2", 2, true);
+        auto const s = [](int i) { return std::to_string(i); };
+        double const h = std::sqrt(0.5);
+        std::string const ry = "\"rotation\": [0, " + std::to_string(h) + ", 0, " + std::to_string(h) + "]";
+        rest = "\"meshes\": ["
+               "{\"name\": \"backdrop_quad\", \"primitives\": [{\"attributes\": {\"POSITION\": " + s(a_pos) +
+               ", \"NORMAL\": " + s(a_nrm) + "}, \"material\": 0}]},"
+               "{\"name\": \"masked_quad\", \"primitives\": [{\"attributes\": {\"POSITION\": " + s(b_pos) +
+               ", \"TEXCOORD_0\": " + s(b_uv) + "}, \"indices\": " + s(b_idx) + ", \"material\": 1}]},"
+               "{\"name\": \"two_parts\", \"primitives\": ["
+               "{\"attributes\": {\"POSITION\": " + s(c_pos) + "}, \"indices\": " + s(c_idx) + ", \"mode\": 5},"
+               "{\"attributes\": {\"POSITION\": " + s(c_fan) + ", \"TEXCOORD_0\": " + s(c_uv) + "}, \"mode\": 6}]}],"
+               "\"materials\": ["
+               "{\"name\": \"red\", \"pbrMetallicRoughness\": {\"baseColorFactor\": [0.8, 0.2, 0.1, 1]}},"
+               "{\"name\": \"leaves\", \"alphaMode\": \"MASK\", \"pbrMetallicRoughness\": {\"baseColorTexture\": {\"index\": 0}}}],"
+               "\"textures\": [{\"source\": 0}],"
+               "\"cameras\": [{\"type\": \"perspective\", \"perspective\": {\"yfov\": 0.8, \"znear\": 0.1}}],"
+               "\"nodes\": ["
+               "{\"name\": \"masked_1\", \"mesh\": 1, \"translation\": [0, 0, -5]},"
+               "{\"name\": \"backdrop\", \"mesh\": 0, \"translation\": [0, 0, -10], \"scale\": [4, 4, 1]},"
+               "{\"name\": \"group\", \"translation\": [10, 0, 0], " + ry + ", \"children\": [3, 4]},"
+               "{\"name\": \"masked_2\", \"mesh\": 1, \"translation\": [0, 0, -5]},"
+               "{\"name\": \"nested\", \"mesh\": 0, \"matrix\": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,-8,1], \"children\": [5]},"
+               "{\"name\": \"deep\", \"mesh\": 0, \"translation\": [0, 0, -1], \"scale\": [0.5, 0.5, 0.5]},"
+               "{\"name\": \"parts\", \"mesh\": 2, \"translation\": [0, -20, 0]},"
+               "{\"name\": \"rig\", \"translation\": [0, 10, 0], \"children\": [8]},"
+               "{\"name\": \"eye\", \"camera\": 0, \"translation\": [1, 2, 3], " + ry + "}],"
+               "\"scenes\": [{\"nodes\": [0, 1, 2, 6, 7]}], \"scene\": 0";
+    }
+
+    // The .gltf with an external .bin and an external mask.png beside it.
+    fs::path write_external(fs::path const& dir) const {
+        write_mask_png(dir / "mask.png");
+        fs::path const file = dir / "forest.gltf";
+        write_text(file, b.document(b.external_buffer(dir / "forest.bin"), rest + ", \"images\": [{\"uri\": \"mask.png\"}]"));
+        return file;
+    }
+};
+
+canopy::mesh_data const& mesh_named(canopy::scene const& s, std::string const& name) {
+    for (auto const& m : s.meshes())
+        if (m.name == name) return m;
+    FAIL("no mesh named " << name);
+    return s.meshes().front();
+}
+
+canopy::ray ray_from(vec3<float> origin, vec3<float> direction) { return {origin, 0.0f, direction, inf}; }
+
+struct traced {
+    bool hit = false;
+    float t = inf;
+    std::string mesh;
+};
+
+template <typename I>
+traced trace(canopy::compiled_scene const& c, canopy::ray const& r, I& isect) {
+    auto const hr = c.closest_hit(r, isect);
+    traced out;
+    out.hit = bool(hr.hit);
+    if (out.hit) {
+        out.t = hr.t;
+        out.mesh = c.meshes[hr.geom_id].name;
+    }
+    return out;
+}
+
+// The checks shared by the external, embedded and .glb versions of the scene.
+void check_instancing_scene(canopy::scene const& s) {
+    canopy::compiled_scene const c = canopy::compile(s, {.plugins = &plugins()});
+
+    // One mesh per primitive, built once; one placement per mesh node.
+    CHECK(s.meshes().size() == 4);
+    REQUIRE(c.meshes.size() == 4);
+    CHECK(c.statistics.meshes_built == 4);
+    CHECK(c.levels == 1);
+    REQUIRE(c.top_meshes.size() == 7);
+    std::map<std::string, int> placed;
+    for (auto const& p : c.top_meshes) ++placed[c.meshes[p.index].name];
+    CHECK(placed["backdrop_quad"] == 3);
+    CHECK(placed["masked_quad"] == 2);
+    CHECK(placed["two_parts.primitives[0]"] == 1);
+    CHECK(placed["two_parts.primitives[1]"] == 1);
+    CHECK(c.statistics.alpha_mask_needed);
+    CHECK(c.statistics.masked_materials_used == 1);
+
+    // Placements of the backdrop quad: its corner (1, 1, 0) lands where the hierarchy puts it.
+    std::vector<vec3<float>> corners;
+    for (auto const& p : c.top_meshes)
+        if (c.meshes[p.index].name == "backdrop_quad") corners.push_back(p.transform.transform_point(vec3<float>(1, 1, 0)));
+    std::vector<vec3<float>> const expected{{4, 4, -10}, {2, 1, -1}, {1, 0.5f, -0.5f}};
+    for (auto const& e : expected) {
+        bool found = false;
+        for (auto const& q : corners)
+            found |= std::abs(q.x - e.x) < 1e-5f && std::abs(q.y - e.y) < 1e-5f && std::abs(q.z - e.z) < 1e-5f;
+        CHECK(found);
+    }
+
+    // Strip and fan, triangulated by the glTF rules; normalized u16 texture coordinates.
+    auto const& strip = mesh_named(s, "two_parts.primitives[0]");
+    REQUIRE(strip.triangles.size() == 2);
+    CHECK(strip.triangles[0] == std::array<std::uint32_t, 3>{0, 1, 2});
+    CHECK(strip.triangles[1] == std::array<std::uint32_t, 3>{1, 3, 2});
+    auto const& fan = mesh_named(s, "two_parts.primitives[1]");
+    REQUIRE(fan.triangles.size() == 2);
+    CHECK(fan.triangles[0] == std::array<std::uint32_t, 3>{1, 2, 0});
+    CHECK(fan.triangles[1] == std::array<std::uint32_t, 3>{2, 3, 0});
+    REQUIRE(fan.uvs.size() == 2);
+    CHECK(fan.uvs[0][0].x == 1.0f);
+    CHECK(fan.uvs[0][1].y == float(32768.0 / 65535.0));
+    CHECK(fan.uvs[0][2].x == 0.0f);
+    auto const& backdrop = mesh_named(s, "backdrop_quad");
+    REQUIRE(backdrop.normals.size() == 2);
+    CHECK(backdrop.normals[1][2].z == 1.0f);
+    CHECK(backdrop.uvs.empty());
+
+    // Materials: the factor as linear colour; the texture's RGB decoded from sRGB, alpha kept.
+    bool saw_red = false, saw_mask = false;
+    for (auto const& m : c.meshes) {
+        auto const& mat = c.materials[std::size_t(m.material)];
+        if (m.name == "backdrop_quad") {
+            saw_red = true;
+            CHECK(mat.albedo.x == 0.8f);
+            CHECK(mat.albedo.y == 0.2f);
+            CHECK(mat.albedo.z == 0.1f);
+            CHECK_FALSE(mat.alpha_mask);
+            CHECK(mat.texture < 0);
+        }
+        if (m.name == "masked_quad") {
+            saw_mask = true;
+            CHECK(mat.alpha_mask);
+            CHECK(mat.alpha_cutoff == 0.5f);
+            REQUIRE(mat.texture >= 0);
+            auto const& tex = c.textures[std::size_t(mat.texture)];
+            REQUIRE(tex.width() == 4);
+            REQUIRE(tex.height() == 4);
+            auto const opaque = tex.texel(1, 1);
+            CHECK(opaque.x == Approx(1.0).margin(1e-6));
+            CHECK(opaque.y == Approx(srgb_to_linear(51.0 / 255.0)).margin(1e-6));
+            CHECK(opaque.z == Approx(0.0).margin(1e-6));
+            CHECK(opaque.w == 1.0f);
+            CHECK(tex.texel(2, 1).w == 0.0f);
+            CHECK(tex.texel(1, 2).w == 0.0f);
+        }
+    }
+    CHECK(saw_red);
+    CHECK(saw_mask);
+
+    // Rays. masked_1 spans [-1, 1]² at z = -5 with uv (0, 0) at (-1, 1): the opaque quadrant
+    // is x < 0, y > 0. The backdrop lies behind it at z = -10.
+    canopy::texture_alpha_mask mask;
+    mask.scene = &c;
+    canopy::default_intersector plain;
+    vec3<float> const down_z{0, 0, -1};
+    auto const opaque = trace(c, ray_from({-0.5f, 0.5f, 5}, down_z), mask);
+    CHECK(opaque.mesh == "masked_quad");
+    CHECK(opaque.t == Approx(10.0f));
+    for (auto const origin : {vec3<float>(0.5f, 0.5f, 5), vec3<float>(-0.5f, -0.5f, 5), vec3<float>(0.5f, -0.5f, 5)}) {
+        auto const through = trace(c, ray_from(origin, down_z), mask);
+        CHECK(through.mesh == "backdrop_quad");
+        CHECK(through.t == Approx(15.0f));
+        auto const ignored = trace(c, ray_from(origin, down_z), plain);
+        CHECK(ignored.mesh == "masked_quad");
+        CHECK(ignored.t == Approx(10.0f));
+    }
+    // masked_2 maps local (x, y) to world (5, y, -x): its opaque quadrant is z > 0, y > 0.
+    // Behind it (seen from +X) lies nested at x = 2.
+    vec3<float> const down_x{-1, 0, 0};
+    auto const opaque2 = trace(c, ray_from({20, 0.5f, 0.5f}, down_x), mask);
+    CHECK(opaque2.mesh == "masked_quad");
+    CHECK(opaque2.t == Approx(15.0f));
+    auto const through2 = trace(c, ray_from({20, 0.5f, -0.5f}, down_x), mask);
+    CHECK(through2.mesh == "backdrop_quad");
+    CHECK(through2.t == Approx(18.0f));
+    auto const ignored2 = trace(c, ray_from({20, 0.5f, -0.5f}, down_x), plain);
+    CHECK(ignored2.t == Approx(15.0f));
+    // From between nested (x = 2) and deep (x = 1): deep, half the size, is hit.
+    CHECK(trace(c, ray_from({1.5f, 0.25f, 0.25f}, down_x), plain).t == Approx(0.5f));
+
+    // The camera where its node puts it.
+    REQUIRE(c.camera.has_value());
+    CHECK(c.camera->eye.x == Approx(1.0f));
+    CHECK(c.camera->eye.y == Approx(12.0f));
+    CHECK(c.camera->eye.z == Approx(3.0f));
+    CHECK(c.camera->target.x == Approx(0.0f));
+    CHECK(c.camera->target.y == Approx(12.0f));
+    CHECK(c.camera->target.z == Approx(3.0f).margin(1e-6));
+    CHECK(c.camera->up.x == Approx(0.0f).margin(1e-6));
+    CHECK(c.camera->up.y == Approx(1.0f));
+    CHECK(c.camera->fovy_degrees == Approx(0.8 * 180.0 / 3.14159265358979));
+}
+
+// Loads `file` expecting a scene_error; returns its message (empty if none was thrown).
+std::string load_error(fs::path const& file) {
+    canopy::scene s;
+    auto const before = s.nodes().size();
+    try {
+        plugins().load(s, file);
+    } catch (canopy::scene_error const& e) {
+        CHECK(s.nodes().size() == before); // nothing half-loaded
+        CHECK(s.meshes().empty());
+        return e.what();
+    }
+    return {};
+}
+
+// A one-primitive file for the error cases: a quad with u16 indices; parts replaceable.
+struct small_file {
+    std::vector<float> positions{-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0};
+    std::vector<std::uint16_t> indices{0, 1, 2, 0, 2, 3};
+    std::string primitive_extra;                        // appended inside the primitive
+    std::string nodes = "[{\"mesh\": 0}]";
+    std::string extra;                                  // appended top-level members
+    std::string index_count;                            // overrides the indices accessor's count
+
+    fs::path write(fs::path const& file) const {
+        gltf_builder b;
+        int const pos = b.vec3s(positions);
+        int const idx = b.add(indices, 5123, "SCALAR", 1);
+        if (!index_count.empty()) {
+            auto& a = b.accessors[std::size_t(idx)];
+            auto const at = a.find("\"count\": ") + 9;
+            a.replace(at, a.find(',', at) - at, index_count);
+        }
+        write_text(file, b.document(b.embedded_buffer(),
+                                    "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": " + std::to_string(pos) +
+                                        "}, \"indices\": " + std::to_string(idx) + primitive_extra + "}]}], \"nodes\": " +
+                                        nodes + ", \"scenes\": [{\"nodes\": [0]}]" + extra));
+        return file;
+    }
+};
+
+} // namespace
+
+TEST_CASE("a glTF mesh used by several nodes is built once and placed once per node") {
+    temp_folder dir;
+    instancing_scene const scene_file;
+    canopy::scene s;
+    plugins().load(s, scene_file.write_external(dir.path));
+    std::size_t mesh_nodes = 0, cameras = 0;
+    for (auto const& n : s.nodes()) {
+        mesh_nodes += n.kind == canopy::node_kind::mesh;
+        cameras += n.kind == canopy::node_kind::camera;
+    }
+    CHECK(mesh_nodes == 7);
+    CHECK(cameras == 1);
+    check_instancing_scene(s);
+}
+
+TEST_CASE("embedded buffers and images (data: URIs) load like external ones") {
+    temp_folder dir;
+    instancing_scene const scene_file;
+    write_mask_png(dir.path / "mask.png");
+    std::string const image = "\"images\": [{\"uri\": \"data:image/png;base64," + base64(read_bytes(dir.path / "mask.png")) + "\"}]";
+    fs::remove(dir.path / "mask.png");
+    fs::path const file = dir.path / "embedded.gltf";
+    write_text(file, scene_file.b.document(scene_file.b.embedded_buffer(), scene_file.rest + ", " + image));
+    canopy::scene s;
+    plugins().load(s, file);
+    check_instancing_scene(s);
+}
+
+TEST_CASE(".glb files load, with the image in a buffer view") {
+    temp_folder dir;
+    instancing_scene scene_file;
+    write_mask_png(dir.path / "mask.png");
+    auto const png = read_bytes(dir.path / "mask.png");
+    fs::remove(dir.path / "mask.png");
+    int const view = scene_file.b.add_view(png.data(), png.size());
+    std::string const json = scene_file.b.document(
+        "{\"byteLength\": " + std::to_string(scene_file.b.bin.size()) + "}",
+        scene_file.rest + ", \"images\": [{\"bufferView\": " + std::to_string(view) + ", \"mimeType\": \"image/png\"}]");
+    fs::path const file = dir.path / "forest.glb";
+    write_glb(file, json, scene_file.b.bin);
+    canopy::scene s;
+    plugins().load(s, file);
+    check_instancing_scene(s);
+}
+
+TEST_CASE("a node with a multi-primitive mesh holds a group of one mesh node per primitive") {
+    temp_folder dir;
+    instancing_scene const scene_file;
+    canopy::scene s;
+    plugins().load(s, scene_file.write_external(dir.path));
+    bool found = false;
+    for (auto const& n : s.nodes()) {
+        if (n.kind != canopy::node_kind::transform || n.name != "parts") continue;
+        found = true;
+        REQUIRE(n.children.size() == 1);
+        auto const& g = s.at(n.children[0]);
+        CHECK(g.kind == canopy::node_kind::group);
+        REQUIRE(g.children.size() == 2);
+        CHECK(s.meshes()[s.at(g.children[0]).mesh].name == "two_parts.primitives[0]");
+        CHECK(s.meshes()[s.at(g.children[1]).mesh].name == "two_parts.primitives[1]");
+    }
+    CHECK(found);
+}
+
+TEST_CASE("sparse accessors replace the listed elements") {
+    temp_folder dir;
+    gltf_builder b;
+    int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
+    int const sparse_index = b.add_view(std::vector<std::uint8_t>{2}.data(), 1);
+    std::vector<float> const moved{3, 4, 5};
+    int const sparse_value = b.add_view(moved.data(), 12);
+    b.accessors[std::size_t(pos)].insert(b.accessors[std::size_t(pos)].size() - 1,
+                                         ", \"sparse\": {\"count\": 1, \"indices\": {\"bufferView\": " +
+                                             std::to_string(sparse_index) + ", \"componentType\": 5121}, "
+                                             "\"values\": {\"bufferView\": " + std::to_string(sparse_value) + "}}");
+    fs::path const file = dir.path / "sparse.gltf";
+    write_text(file, b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
+                                                     "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+    canopy::scene s;
+    plugins().load(s, file);
+    REQUIRE(s.meshes().size() == 1);
+    auto const& p = s.meshes()[0].positions;
+    REQUIRE(p.size() == 3);
+    CHECK(p[0].x == -1.0f);
+    CHECK(p[1].x == 1.0f);
+    CHECK(p[2].x == 3.0f);
+    CHECK(p[2].y == 4.0f);
+    CHECK(p[2].z == 5.0f);
+}
+
+TEST_CASE("the gltf plugin registers loaders for .gltf and .glb") {
+    CHECK(plugins().has_loader(".gltf"));
+    CHECK(plugins().has_loader(".glb"));
+    bool named = false;
+    for (auto const& l : plugins().loaders()) named |= l.name == ".glb" && l.plugin == "gltf";
+    CHECK(named);
+}
+
+TEST_CASE("bad glTF files give errors naming the file and the element") {
+    temp_folder dir;
+    auto const expect = [&](fs::path const& file, std::vector<std::string> const& parts) {
+        std::string const message = load_error(file);
+        INFO(message);
+        REQUIRE_FALSE(message.empty());
+        CHECK(message.find(file.filename().string()) != std::string::npos);
+        for (auto const& p : parts) CHECK(message.find(p) != std::string::npos);
+    };
+
+    SECTION("missing file") {
+        expect(dir.path / "absent.gltf", {"absent.gltf"});
+        canopy::scene s;
+        CHECK_THROWS_WITH(canopy::load_gltf(s, dir.path / "absent.gltf", s.root(), plugins()),
+                          Catch::Contains("absent.gltf") && Catch::Contains("no such file"));
+    }
+    SECTION("malformed JSON") {
+        write_text(dir.path / "broken.gltf", "{\"asset\": {\"version\": \"2.0\"}, \"nodes\": [{\"mesh\": ");
+        expect(dir.path / "broken.gltf", {"parse error at line 1"});
+    }
+    SECTION("missing external buffer") {
+        gltf_builder b;
+        b.vec3s({0, 0, 0, 1, 0, 0, 0, 1, 0});
+        write_text(dir.path / "nobin.gltf",
+                   b.document("{\"uri\": \"absent.bin\", \"byteLength\": 36}",
+                              "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
+                              "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+        expect(dir.path / "nobin.gltf", {"absent.bin"});
+    }
+    SECTION("accessor reaching past its buffer view") {
+        small_file f;
+        f.index_count = "7";
+        expect(f.write(dir.path / "long.gltf"), {"meshes[0].primitives[0]", "accessors[1]", "bufferViews[1]"});
+    }
+    SECTION("index out of range") {
+        small_file f;
+        f.indices = {0, 1, 2, 0, 2, 7};
+        expect(f.write(dir.path / "index.gltf"),
+               {"meshes[0].primitives[0]", "index 7 at position 5 is out of range (4 vertices)"});
+    }
+    SECTION("NaN position") {
+        small_file f;
+        f.positions[4] = std::numeric_limits<float>::quiet_NaN();
+        expect(f.write(dir.path / "nan.gltf"), {"meshes[0].primitives[0]", "POSITION", "vertex 1", "not finite"});
+    }
+    SECTION("lines are not triangles") {
+        small_file f;
+        f.primitive_extra = ", \"mode\": 1";
+        expect(f.write(dir.path / "lines.gltf"), {"meshes[0].primitives[0]", "LINES"});
+    }
+    SECTION("triangle list not a multiple of 3") {
+        small_file f;
+        f.indices = {0, 1, 2, 0};
+        expect(f.write(dir.path / "four.gltf"), {"meshes[0].primitives[0]", "not a multiple of 3"});
+    }
+    SECTION("node referring to a missing mesh") {
+        small_file f;
+        f.nodes = "[{\"mesh\": 9}]";
+        expect(f.write(dir.path / "nomesh.gltf"), {"nodes[0]", "mesh 9 does not exist"});
+    }
+    SECTION("node hierarchy with a cycle") {
+        small_file f;
+        f.nodes = "[{\"children\": [1]}, {\"mesh\": 0, \"children\": [0]}]";
+        expect(f.write(dir.path / "cycle.gltf"), {"nodes[0]", "reached twice"});
+    }
+    SECTION("zero scale") {
+        small_file f;
+        f.nodes = "[{\"mesh\": 0, \"scale\": [1, 0, 1]}]";
+        expect(f.write(dir.path / "flat.gltf"), {"nodes[0]", "scale"});
+    }
+    SECTION("missing texture image") {
+        small_file f;
+        f.primitive_extra = ", \"material\": 0";
+        f.extra = ", \"materials\": [{\"alphaMode\": \"MASK\", \"pbrMetallicRoughness\": {\"baseColorTexture\": "
+                  "{\"index\": 0}}}], \"textures\": [{\"source\": 0}], \"images\": [{\"uri\": \"absent.png\"}]";
+        // The texture needs texture coordinates: first their absence, then the missing image.
+        expect(f.write(dir.path / "nouv.gltf"), {"meshes[0].primitives[0]", "TEXCOORD_0"});
+        f.primitive_extra = ", \"material\": 0";
+        f.extra = ", \"materials\": [{\"pbrMetallicRoughness\": {\"baseColorTexture\": {\"index\": 0}}}], "
+                  "\"textures\": [{\"source\": 0}], \"images\": [{\"uri\": \"absent.png\"}]";
+        gltf_builder b;
+        int const pos = b.vec3s(f.positions);
+        int const uv = b.vec2s({0, 1, 1, 1, 1, 0, 0, 0});
+        write_text(dir.path / "noimage.gltf",
+                   b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": " +
+                                                       std::to_string(pos) + ", \"TEXCOORD_0\": " + std::to_string(uv) +
+                                                       "}, \"mode\": 6, \"material\": 0}]}], \"nodes\": [{\"mesh\": 0}], "
+                                                       "\"scenes\": [{\"nodes\": [0]}]" + f.extra));
+        expect(dir.path / "noimage.gltf", {"images[0]", "absent.png"});
+    }
+    SECTION("bad sparse index") {
+        gltf_builder b;
+        int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
+        int const sparse_index = b.add_view(std::vector<std::uint8_t>{3}.data(), 1);
+        std::vector<float> const moved{3, 4, 5};
+        int const sparse_value = b.add_view(moved.data(), 12);
+        b.accessors[std::size_t(pos)].insert(b.accessors[std::size_t(pos)].size() - 1,
+                                             ", \"sparse\": {\"count\": 1, \"indices\": {\"bufferView\": " +
+                                                 std::to_string(sparse_index) + ", \"componentType\": 5121}, "
+                                                 "\"values\": {\"bufferView\": " + std::to_string(sparse_value) + "}}");
+        write_text(dir.path / "sparse.gltf",
+                   b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
+                                                   "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+        expect(dir.path / "sparse.gltf", {"meshes[0].primitives[0]", "sparse index 3"});
+    }
+    SECTION("orthographic camera") {
+        small_file f;
+        f.nodes = "[{\"mesh\": 0, \"camera\": 0}]";
+        f.extra = ", \"cameras\": [{\"type\": \"orthographic\", \"orthographic\": {\"xmag\": 1, \"ymag\": 1, "
+                  "\"znear\": 0.1, \"zfar\": 10}}]";
+        expect(f.write(dir.path / "ortho.gltf"), {"cameras[0]", "orthographic"});
+    }
+    SECTION("required extension") {
+        small_file f;
+        f.extra = ", \"extensionsUsed\": [\"KHR_draco_mesh_compression\"], "
+                  "\"extensionsRequired\": [\"KHR_draco_mesh_compression\"]";
+        expect(f.write(dir.path / "draco.gltf"), {"KHR_draco_mesh_compression"});
+    }
+}
