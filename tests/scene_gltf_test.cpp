@@ -647,3 +647,107 @@ TEST_CASE("bad glTF files give errors naming the file and the element") {
         expect(f.write(dir.path / "draco.gltf"), {"KHR_draco_mesh_compression"});
     }
 }
+
+
+// ---- Debian's assimp-testmodels (the glTF Asset Generator and deliberately broken files) ----------
+
+namespace {
+fs::path const assimp_gltf = "/usr/share/assimp/models/glTF2";
+}
+
+TEST_CASE("the Asset Generator's triangle, strip and fan quads load as two front-facing triangles covering the quad") {
+    // Each file holds the square [-0.5, 0.5]² at z = 0, counter-clockwise seen from +Z, in one
+    // primitive: unindexed (04 strip, 05 fan, 06 list) or indexed (11 strip, 12 fan, 13-15 list
+    // with u32, u8 and u16 indices).
+    for (char const* n : {"04", "05", "06", "11", "12", "13", "14", "15"}) {
+        fs::path const file = assimp_gltf / "glTF-Asset-Generator/Mesh_PrimitiveMode" / ("Mesh_PrimitiveMode_" + std::string(n) + ".gltf");
+        INFO(file.string());
+        REQUIRE(fs::exists(file));
+        canopy::scene s;
+        plugins().load(s, file);
+        REQUIRE(s.meshes().size() == 1);
+        auto const& m = s.meshes()[0];
+        REQUIRE(m.triangles.size() == 2);
+        for (auto const& t : m.triangles) {
+            auto const e1 = m.positions[t[1]] - m.positions[t[0]];
+            auto const e2 = m.positions[t[2]] - m.positions[t[0]];
+            CHECK(e1.x * e2.y - e1.y * e2.x > 0.0f); // counter-clockwise: the face points along +Z
+        }
+        canopy::compiled_scene const c = canopy::compile(s, {.plugins = &plugins()});
+        canopy::default_intersector plain;
+        for (float x : {-0.4f, -0.15f, 0.1f, 0.35f})
+            for (float y : {-0.35f, -0.05f, 0.2f, 0.45f}) {
+                auto const hit = trace(c, ray_from({x, y, 1}, {0, 0, -1}), plain);
+                CHECK(hit.hit);
+                CHECK(hit.t == Approx(1.0f));
+            }
+        CHECK_FALSE(trace(c, ray_from({0.6f, 0.0f, 1}, {0, 0, -1}), plain).hit);
+    }
+}
+
+TEST_CASE("the Asset Generator's points and lines are refused, naming the primitive and the mode") {
+    std::map<std::string, std::string> const modes{{"00", "POINTS"}, {"01", "LINES"}, {"02", "LINE_LOOP"}, {"03", "LINE_STRIP"}};
+    for (auto const& [n, mode] : modes) {
+        fs::path const file = assimp_gltf / "glTF-Asset-Generator/Mesh_PrimitiveMode" / ("Mesh_PrimitiveMode_" + n + ".gltf");
+        REQUIRE(fs::exists(file));
+        std::string const message = load_error(file);
+        INFO(message);
+        CHECK(message.find(file.filename().string()) != std::string::npos);
+        CHECK(message.find("meshes[0].primitives[0]: mode " + mode + " is not supported") != std::string::npos);
+    }
+}
+
+TEST_CASE("assimp's broken glTF files give errors naming the file and the element") {
+    struct broken {
+        char const* file;
+        std::vector<std::string> parts;
+    };
+    std::vector<broken> const cases{
+        {"IndexOutOfRange/IndexOutOfRange.gltf", {"meshes[0].primitives[0]", "is out of range (24 vertices)"}},
+        {"IndexOutOfRange/AllIndicesOutOfRange.gltf", {"meshes[0].primitives[0]", "index 65535 at position 0"}},
+        {"BoxWithInfinites-glTF-Binary/BoxWithInfinites.glb", {"meshes[0].primitives[0]", "POSITION", "not finite"}},
+        {"RecursiveNodes/RecursiveNodes.gltf", {"nodes[", "reached twice"}},
+        {"MissingBin/BoxTextured.gltf", {"BoxTextured0.bin"}},
+        {"IncorrectVertexArrays/Cube.gltf", {"meshes[1].primitives[0]", "not a multiple of 3"}},
+        {"BoxTextured-glTF-techniqueWebGL/BoxTextured.gltf", {"extensionsRequired", "KHR_technique_webgl"}},
+    };
+    for (auto const& b : cases) {
+        fs::path const file = assimp_gltf / b.file;
+        REQUIRE(fs::exists(file));
+        std::string const message = load_error(file);
+        INFO(message);
+        CHECK(message.find(file.filename().string()) != std::string::npos);
+        for (auto const& p : b.parts) CHECK(message.find(p) != std::string::npos);
+    }
+}
+
+TEST_CASE("assimp's textured box loads alike from .gltf, embedded .gltf and .glb") {
+    // 12 triangles; the base colour texture (CesiumLogoFlat.png, 211×211 with a palette) in all three forms.
+    std::vector<std::vector<canopy::vec4<float>>> texels;
+    for (char const* f : {"BoxTextured-glTF/BoxTextured.gltf", "BoxTextured-glTF-Embedded/BoxTextured.gltf",
+                          "BoxTextured-glTF-Binary/BoxTextured.glb"}) {
+        INFO(f);
+        REQUIRE(fs::exists(assimp_gltf / f));
+        canopy::scene s;
+        plugins().load(s, assimp_gltf / f);
+        REQUIRE(s.meshes().size() == 1);
+        CHECK(s.meshes()[0].triangles.size() == 12);
+        CHECK(s.meshes()[0].uvs.size() == 12);
+        REQUIRE(s.images().size() == 1);
+        CHECK(s.images()[0].width == 211);
+        CHECK(s.images()[0].height == 211);
+        texels.push_back(s.images()[0].texels);
+    }
+    // The file through the registry's image loader (OpenImageIO) and the embedded copies through
+    // tinygltf's decoder: the same 8-bit values, so the same linear texels up to float rounding.
+    REQUIRE(texels.size() == 3);
+    for (std::size_t k = 1; k < 3; ++k) {
+        REQUIRE(texels[k].size() == texels[0].size());
+        float worst = 0.0f;
+        for (std::size_t i = 0; i < texels[0].size(); ++i)
+            for (float d : {texels[k][i].x - texels[0][i].x, texels[k][i].y - texels[0][i].y,
+                            texels[k][i].z - texels[0][i].z, texels[k][i].w - texels[0][i].w})
+                worst = std::max(worst, std::abs(d));
+        CHECK(worst < 1e-6f);
+    }
+}
