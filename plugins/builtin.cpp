@@ -5,11 +5,13 @@ module;
 #include <string>
 module canopy.plugins;
 import canopy.plugins.oiio;
+import canopy.plugins.gltf;
 
 namespace canopy {
 
 void register_builtin_plugins(registry& r) {
     register_oiio_plugin(r);
+    register_gltf_plugin(r);
 }
 
 registry& builtin_registry() {
