@@ -5,11 +5,15 @@ module;
 #include <string>
 module canopy.plugins;
 import canopy.plugins.oiio;
+import canopy.plugins.bench;
+import canopy.plugins.procedural;
 import canopy.plugins.gltf;
 
 namespace canopy {
 
 void register_builtin_plugins(registry& r) {
+    register_bench_plugin(r); // first: the general .obj loaders registered later are the default
+    register_procedural_plugin(r);
     register_oiio_plugin(r);
     register_gltf_plugin(r);
 }

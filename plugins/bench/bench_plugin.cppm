@@ -1,0 +1,119 @@
+// canopy.plugins.bench — the benchmark scene formats (bench/FORMATS.md of the shared
+// specification) as scene-graph content, read by canopy.bench_formats.
+//
+// Loads:
+//   .inst  one shared mesh (the `mesh PATH` line, an .obj of the subset below) and one instance
+//          node per matrix line, in file order, all of one free-standing prototype mesh node.
+//          Instance k has instance_id k; compile() places the instances in node order, so the
+//          inst_id of a hit is the instance's line index among the matrix lines (when the file is
+//          the only content of the scene; a file with a single identity instance compiles to a
+//          plain mesh, levels 0, whose hits carry no inst_id).
+//   .obj   (plugin name "bench", registered before the general OBJ loaders, which stay the
+//          default: load(s, file, parent, "bench") picks this one) the strict OBJ subset: `v` and
+//          triangular `f` lines only; triangle i is the i-th `f` line (its prim_id).
+// Vertices are not shared between triangles (three per triangle, as the subset reader returns
+// them). Each file becomes a group named after it. Parameters: none.
+// Errors: whatever the format reader reports (faces that are not triangles, bad or non-finite
+// numbers, out-of-range indices, a missing or second `mesh` line, singular transforms,
+// unreadable files), as scene_error naming the file at fault (the .inst or its mesh) and the
+// line; and files that hold nothing to trace (a mesh without `f` lines, an .inst without
+// instance lines).
+module;
+#include <cctype>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <utility>
+export module canopy.plugins.bench;
+import canopy.scene;
+import canopy.bench_formats;
+
+export namespace canopy {
+
+void register_bench_plugin(registry& r);
+
+} // namespace canopy
+
+namespace canopy {
+
+namespace {
+
+// format_error's message is "FILE[:LINE]: PROBLEM"; scene_error keeps the three apart.
+[[noreturn]] void rethrow(format_error const& e, std::filesystem::path const& file) {
+    std::string const message = e.what();
+    std::size_t const colon = message.find(": ");
+    if (colon == std::string::npos) throw scene_error(file.string(), "", message);
+    std::string head = message.substr(0, colon);
+    std::string line;
+    if (std::size_t const last = head.rfind(':'); last != std::string::npos && last + 1 < head.size()) {
+        std::string const tail = head.substr(last + 1);
+        bool digits = true;
+        for (char c : tail) digits &= std::isdigit(static_cast<unsigned char>(c)) != 0;
+        if (digits) {
+            line = tail;
+            head.resize(last);
+        }
+    }
+    throw scene_error(head.empty() ? file.string() : head, line, message.substr(colon + 2));
+}
+
+mesh_data to_mesh(bench_mesh const& in, std::filesystem::path const& file) {
+    mesh_data m;
+    m.name = file.filename().string();
+    m.source = file.string();
+    m.positions.reserve(3 * in.triangles.size());
+    m.triangles.reserve(in.triangles.size());
+    for (auto const& t : in.triangles) {
+        auto const first = std::uint32_t(m.positions.size());
+        m.positions.insert(m.positions.end(), {t.v0, t.v1, t.v2});
+        m.triangles.push_back({first, first + 1, first + 2});
+    }
+    return m;
+}
+
+node_id load_inst(scene& s, std::filesystem::path const& file, node_id parent, registry const&) {
+    bench_instanced_scene in;
+    try {
+        in = read_bench_inst(file);
+    } catch (format_error const& e) {
+        rethrow(e, file);
+    }
+    if (in.instances.empty()) throw scene_error(file.string(), "", "has no instance lines (12 numbers each)");
+    if (in.mesh.triangles.empty()) throw scene_error(in.mesh_path.string(), "", "has no triangles ('f' lines)");
+    std::uint32_t const mesh = s.add_mesh(to_mesh(in.mesh, in.mesh_path));
+    node_id const prototype = s.add_mesh_node(no_node, mesh, in.mesh_path.filename().string());
+    s.at(prototype).source = file.string();
+    node_id const group = s.add_group(parent, file.filename().string());
+    s.at(group).source = file.string();
+    for (std::size_t k = 0; k < in.instances.size(); ++k) {
+        node_id const n = s.add_instance(group, prototype, in.instances[k], std::uint32_t(k));
+        s.at(n).source = file.string();
+    }
+    return group;
+}
+
+node_id load_obj(scene& s, std::filesystem::path const& file, node_id parent, registry const&) {
+    bench_mesh in;
+    try {
+        in = read_bench_obj(file);
+    } catch (format_error const& e) {
+        rethrow(e, file);
+    }
+    if (in.triangles.empty()) throw scene_error(file.string(), "", "has no triangles ('f' lines)");
+    std::uint32_t const mesh = s.add_mesh(to_mesh(in, file));
+    node_id const group = s.add_group(parent, file.filename().string());
+    s.at(group).source = file.string();
+    s.at(s.add_mesh_node(group, mesh, file.filename().string())).source = file.string();
+    return group;
+}
+
+} // namespace
+
+void register_bench_plugin(registry& r) {
+    r.add_loader(".inst", "bench", "benchmark instanced scene: one shared .obj mesh, one 3×4 matrix per instance",
+                 load_inst);
+    r.add_loader(".obj", "bench", "benchmark OBJ subset: v and triangular f lines only, prim_id = f line order",
+                 load_obj);
+}
+
+} // namespace canopy

@@ -1,0 +1,315 @@
+// Tests of canopy.plugins.bench: .inst files written here load into one shared mesh and one
+// instance node per matrix line (counts and transforms as written), and compile() traces them
+// exactly as Canopy's direct bench path does (the mesh BVH, instances and top-level BVH built by
+// hand as `canopy trace` builds them): same t, u, v, prim_id and inst_id, ray by ray. The strict
+// .obj subset loads under the plugin name "bench". Malformed files (written here, and broken
+// models from Debian's assimp-testmodels) give scene errors naming the file at fault and the line.
+#include <catch2/catch.hpp>
+
+#include <array>
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+import canopy.scene;
+import canopy.bench_formats;
+import canopy.procedural;
+import canopy.plugins.bench;
+
+namespace {
+
+namespace fs = std::filesystem;
+using canopy::vec3;
+using xf = canopy::affine_transform<float>;
+
+// A fresh folder for one test's files.
+fs::path temp_folder(std::string const& name) {
+    fs::path const p = fs::temp_directory_path() / ("canopy_scene_bench_test_" + name);
+    fs::remove_all(p);
+    fs::create_directories(p);
+    return p;
+}
+
+void write(fs::path const& file, std::string const& text) {
+    std::ofstream out(file, std::ios::binary);
+    out << text;
+}
+
+std::string number(float v) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%.9g", double(v));
+    return buffer;
+}
+
+// The icosphere (1 subdivision, 80 triangles) as OBJ text with shared vertices: `v` lines,
+// then `f` lines in three spellings (plain, a/b/c, negative) that all mean the same.
+std::string sphere_obj(std::size_t& triangles) {
+    auto const tris = canopy::make_icosphere(1, {0.0f, 0.0f, 0.0f}, 1.0f);
+    std::string text = "# icosphere\n";
+    for (auto const& t : tris)
+        for (auto const& v : {t.v0, t.v1, t.v2}) text += "v " + number(v.x) + " " + number(v.y) + " " + number(v.z) + "\n";
+    for (std::size_t i = 0; i < tris.size(); ++i) {
+        std::size_t const a = 3 * i + 1;
+        if (i % 3 == 0) text += "f " + std::to_string(a) + " " + std::to_string(a + 1) + " " + std::to_string(a + 2) + "\n";
+        else if (i % 3 == 1)
+            text += "f " + std::to_string(a) + "/1/1 " + std::to_string(a + 1) + "/2/2 " + std::to_string(a + 2) + "//3\n";
+        else {
+            long const n = long(3 * tris.size()); // vertices so far
+            text += "f " + std::to_string(long(a) - 1 - n) + " " + std::to_string(long(a) - n) + " " +
+                    std::to_string(long(a) + 1 - n) + "\n";
+        }
+    }
+    triangles = tris.size();
+    return text;
+}
+
+// Row-major 3×4 matrices of the instances written to the test's .inst file.
+std::vector<std::array<float, 12>> instance_rows() {
+    return {
+        {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0},               // identity
+        {1, 0, 0, 3, 0, 1, 0, 0, 0, 0, 1, 0},               // translation
+        {0.5f, 0, 0, -3, 0, 0.5f, 0, 1, 0, 0, 0.5f, 0.25f}, // scale
+        {0, -2, 0, 0, 2, 0, 0, 3, 0, 0, 2, -1},             // rotation about z by 90°, scale 2
+        {0.8f, -0.6f, 0, 1.5f, 0.6f, 0.8f, 0, -2.5f, 0, 0, 1, 0.5f},
+    };
+}
+
+fs::path write_inst(fs::path const& folder, std::size_t& triangles) {
+    write(folder / "sphere.obj", sphere_obj(triangles));
+    std::string text = "# five spheres\nmesh sphere.obj\n";
+    for (auto const& rows : instance_rows()) {
+        for (float v : rows) text += number(v) + " ";
+        text += "\n";
+    }
+    write(folder / "spheres.inst", text);
+    return folder / "spheres.inst";
+}
+
+canopy::registry bench_registry() {
+    canopy::registry r;
+    canopy::register_bench_plugin(r);
+    return r;
+}
+
+std::vector<canopy::ray> random_rays(std::uint32_t seed, std::size_t count) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> box(-6.0f, 6.0f), target(-3.5f, 3.5f);
+    std::vector<canopy::ray> rays;
+    for (std::size_t i = 0; i < count; ++i) {
+        vec3<float> const o(box(rng), box(rng), 10.0f);
+        vec3<float> const t(target(rng), target(rng) + 0.5f, target(rng));
+        rays.push_back(canopy::ray{o, 0.0f, t - o, 1e30f});
+    }
+    return rays;
+}
+
+canopy::scene_error error_of(auto&& f) {
+    try {
+        f();
+    } catch (canopy::scene_error const& e) {
+        return e;
+    }
+    return canopy::scene_error("", "", "(no scene_error)");
+}
+
+} // namespace
+
+TEST_CASE(".inst loads one shared mesh and one instance node per matrix line, in file order") {
+    auto const folder = temp_folder("load");
+    std::size_t triangles = 0;
+    auto const file = write_inst(folder, triangles);
+    auto const r = bench_registry();
+    canopy::scene s;
+    canopy::node_id const group = r.load(s, file);
+    CHECK(s.at(group).name == "spheres.inst");
+    REQUIRE(s.meshes().size() == 1);
+    CHECK(s.meshes()[0].triangles.size() == triangles);
+    auto const rows = instance_rows();
+    REQUIRE(s.at(group).children.size() == rows.size());
+    canopy::node_id prototype = canopy::no_node;
+    for (std::size_t k = 0; k < rows.size(); ++k) {
+        auto const& n = s.at(s.at(group).children[k]);
+        REQUIRE(n.kind == canopy::node_kind::instance);
+        CHECK(n.instance_id == k);
+        if (k == 0) prototype = n.target;
+        CHECK(n.target == prototype);
+        auto const expected = xf::from_rows(rows[k]);
+        for (int c = 0; c < 3; ++c) {
+            CHECK(n.transform.linear.col0[c] == expected.linear.col0[c]);
+            CHECK(n.transform.linear.col1[c] == expected.linear.col1[c]);
+            CHECK(n.transform.linear.col2[c] == expected.linear.col2[c]);
+            CHECK(n.transform.translation[c] == expected.translation[c]);
+        }
+    }
+    CHECK(s.at(prototype).kind == canopy::node_kind::mesh);
+
+    canopy::compiled_scene const c = canopy::compile(s);
+    CHECK(c.levels == 1);
+    CHECK(c.statistics.meshes_built == 1);
+    CHECK(c.statistics.placements == rows.size());
+    CHECK(c.statistics.identity_placements == 1);
+}
+
+TEST_CASE(".inst through compile() gives the direct bench path's closest hits, ray by ray") {
+    auto const folder = temp_folder("trace");
+    std::size_t triangles = 0;
+    auto const file = write_inst(folder, triangles);
+    auto const r = bench_registry();
+    canopy::compiled_scene const c = canopy::compile(canopy::load_scene(file, r));
+
+    // The direct path of `canopy trace`: mesh BVH, instances with id = line index, top BVH.
+    auto const inst = canopy::read_bench_inst(file);
+    auto const mesh = canopy::build_binned_sah(inst.mesh.triangles);
+    std::vector<canopy::instance<canopy::bvh<canopy::triangle>>> instances;
+    for (std::size_t k = 0; k < inst.instances.size(); ++k) instances.emplace_back(mesh, inst.instances[k], std::uint32_t(k));
+    auto const top = canopy::build_binned_sah(instances);
+
+    canopy::default_intersector isect;
+    std::size_t same = 0, hits = 0;
+    std::vector<int> per_instance(instances.size(), 0);
+    auto const rays = random_rays(1, 3000);
+    for (auto const& ray : rays) {
+        auto const a = c.closest_hit(ray, isect);
+        auto const b = canopy::closest_hit(ray, &top, &top + 1);
+        bool const equal = a.hit == b.hit && (!a.hit || (a.t == b.t && a.u == b.u && a.v == b.v && a.prim_id == b.prim_id &&
+                                                         a.inst_id == b.inst_id));
+        same += equal;
+        if (b.hit) {
+            ++hits;
+            ++per_instance.at(b.inst_id);
+        }
+    }
+    CHECK(same == rays.size());
+    CHECK(hits > rays.size() / 4);
+    for (int n : per_instance) CHECK(n > 0); // every instance is seen, so inst ids are compared
+}
+
+TEST_CASE("bench .obj loads the strict subset: prim_id is the f line order") {
+    auto const folder = temp_folder("obj");
+    std::size_t triangles = 0;
+    write(folder / "sphere.obj", sphere_obj(triangles));
+    auto r = bench_registry();
+    // A general OBJ loader registered later is the default; "bench" still picks this one.
+    r.add_loader(".obj", "other", "a stand-in general loader", [](canopy::scene&, fs::path const&, canopy::node_id, canopy::registry const&) -> canopy::node_id {
+        throw canopy::scene_error("", "", "the other loader");
+    });
+    canopy::scene s;
+    CHECK(std::string(error_of([&] { r.load(s, folder / "sphere.obj"); }).what()).find("the other loader") != std::string::npos);
+    r.load(s, folder / "sphere.obj", s.root(), "bench");
+    REQUIRE(s.meshes().size() == 1);
+    CHECK(s.meshes()[0].triangles.size() == triangles);
+
+    canopy::compiled_scene const c = canopy::compile(s);
+    CHECK(c.levels == 0);
+    auto const direct = canopy::build_binned_sah(canopy::read_bench_obj(folder / "sphere.obj").triangles);
+    auto const reference = canopy::make_icosphere(1, {0.0f, 0.0f, 0.0f}, 1.0f);
+    canopy::default_intersector isect;
+    std::size_t same = 0, hits = 0, same_triangle = 0;
+    auto const rays = random_rays(2, 1000);
+    for (auto const& ray : rays) {
+        auto const a = c.closest_hit(ray, isect);
+        auto const b = canopy::closest_hit(ray, &direct, &direct + 1);
+        same += a.hit == b.hit && (!a.hit || (a.t == b.t && a.prim_id == b.prim_id && a.u == b.u && a.v == b.v));
+        if (a.hit) {
+            ++hits;
+            // The f line order is the icosphere's triangle order (the file was written from it).
+            auto const& t = reference.at(a.prim_id);
+            auto const& m = c.meshes[0].triangles[a.prim_id];
+            same_triangle += t.v0.x == m.v0.x && t.v1.y == m.v1.y && t.v2.z == m.v2.z;
+        }
+    }
+    CHECK(same == rays.size());
+    CHECK(hits > 0);
+    CHECK(same_triangle == hits);
+}
+
+TEST_CASE("malformed bench files are scene errors naming the file at fault and the line") {
+    auto const folder = temp_folder("errors");
+    std::size_t triangles = 0;
+    write(folder / "sphere.obj", sphere_obj(triangles));
+    write(folder / "quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
+    write(folder / "index.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\nf 1 2 7\n");
+    write(folder / "empty.obj", "# nothing\nv 0 0 0\n");
+    write(folder / "short_row.inst", "mesh sphere.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n");
+    write(folder / "no_mesh.inst", "1 0 0 0 0 1 0 0 0 0 1 0\n");
+    write(folder / "two_meshes.inst", "mesh sphere.obj\nmesh sphere.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    write(folder / "missing_mesh.inst", "mesh nowhere.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    write(folder / "bad_mesh.inst", "mesh quad.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    write(folder / "nan.inst", "mesh sphere.obj\n# comment\n1 0 0 0 0 1 0 nan 0 0 1 0\n");
+    write(folder / "singular.inst", "mesh sphere.obj\n1 0 0 0 0 1 0 0 0 0 0 0\n");
+    write(folder / "no_instances.inst", "mesh sphere.obj\n# none\n");
+
+    struct expectation {
+        char const* load;
+        char const* file; // the file the error names
+        char const* where;
+        char const* problem;
+    };
+    auto const r = bench_registry();
+    for (auto const& [load, file, where, problem] : {
+             expectation{"quad.obj", "quad.obj", "5", "only triangles"},
+             expectation{"index.obj", "index.obj", "5", "out of range"},
+             expectation{"empty.obj", "empty.obj", "", "no triangles"},
+             expectation{"short_row.inst", "short_row.inst", "3", "12 numbers"},
+             expectation{"no_mesh.inst", "no_mesh.inst", "", "no 'mesh' line"},
+             expectation{"two_meshes.inst", "two_meshes.inst", "2", "second 'mesh'"},
+             expectation{"missing_mesh.inst", "nowhere.obj", "", "cannot open"},
+             expectation{"bad_mesh.inst", "quad.obj", "5", "only triangles"},
+             expectation{"nan.inst", "nan.inst", "3", "non-finite"},
+             expectation{"singular.inst", "singular.inst", "2", "singular"},
+             expectation{"no_instances.inst", "no_instances.inst", "", "no instance lines"},
+             expectation{"absent.inst", "absent.inst", "", "not found"},
+         }) {
+        CAPTURE(load);
+        canopy::scene s;
+        std::size_t const nodes = s.nodes().size();
+        auto const e = error_of([&] { r.load(s, folder / load, s.root(), "bench"); });
+        CHECK(fs::path(e.file()).filename() == file);
+        CHECK(e.where() == where);
+        CHECK(e.problem().find(problem) != std::string::npos);
+        CHECK(s.nodes().size() == nodes);
+        CHECK(s.meshes().empty());
+    }
+}
+
+TEST_CASE("broken and odd OBJ files of assimp-testmodels: errors with lines, or the triangles they hold") {
+    fs::path const models = "/usr/share/assimp/models/OBJ";
+    REQUIRE(fs::exists(models / "box.obj"));
+    auto const r = bench_registry();
+    auto const load = [&](char const* name) {
+        canopy::scene s;
+        return error_of([&] { r.load(s, models / name, s.root(), "bench"); });
+    };
+    // Quads (the first `f` line is line 23 of box.obj).
+    auto const box = load("box.obj");
+    CHECK(box.file() == (models / "box.obj").string());
+    CHECK(box.where() == "23");
+    CHECK(box.problem().find("only triangles") != std::string::npos);
+    // "3.1+e2" on line 11 is not a number.
+    auto const numbers = load("number_formats.obj");
+    CHECK(numbers.where() == "11");
+    CHECK(numbers.problem().find("'3.1+e2'") != std::string::npos);
+    // UTF-16 text and a point cloud: no `f` line the subset reads.
+    CHECK(load("box_UTF16BE.obj").problem().find("no triangles") != std::string::npos);
+    CHECK(load("testpoints.obj").problem().find("no triangles") != std::string::npos);
+
+    // Extra spaces everywhere: one triangle, (1,2,3) (2,3,1) (3,1,2).
+    canopy::scene s;
+    r.load(s, models / "multiple_spaces.obj", s.root(), "bench");
+    REQUIRE(s.meshes().size() == 1);
+    auto const& m = s.meshes()[0];
+    REQUIRE(m.triangles.size() == 1);
+    auto const& t = m.triangles[0];
+    CHECK(m.positions[t[0]].x == 1.0f);
+    CHECK(m.positions[t[1]].x == 2.0f);
+    CHECK(m.positions[t[2]].x == 3.0f);
+    CHECK(m.positions[t[2]].y == 1.0f);
+    // A cube of 12 triangles among usemtl and mtllib lines.
+    canopy::scene cube;
+    r.load(cube, models / "cube_usemtl.obj", cube.root(), "bench");
+    CHECK(cube.meshes().at(0).triangles.size() == 12);
+}
