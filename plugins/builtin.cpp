@@ -5,6 +5,7 @@ module;
 #include <string>
 module canopy.plugins;
 import canopy.plugins.oiio;
+import canopy.plugins.openmesh;
 import canopy.plugins.bench;
 import canopy.plugins.procedural;
 import canopy.plugins.gltf;
@@ -13,6 +14,7 @@ namespace canopy {
 
 void register_builtin_plugins(registry& r) {
     register_bench_plugin(r); // first: the general .obj loaders registered later are the default
+    register_openmesh_plugin(r); // before obj: the obj plugin is the default for .obj
     register_procedural_plugin(r);
     register_oiio_plugin(r);
     register_gltf_plugin(r);

@@ -1,0 +1,73 @@
+// canopy.plugins.openmesh — triangle meshes through OpenMesh 9: .ply .off .stl .om .obj
+//
+// Loads: one file into one mesh_data (name = the file's stem, source = the file's path) under a
+// group node named after the file. Parameters: none. Plugin name "openmesh"; for .obj it is not
+// the default loader (the "obj" plugin is): choose it with registry::load(s, file, parent,
+// "openmesh").
+//
+// What is read:
+//   positions     every vertex of the file, in file order (no vertex is merged or split; STL is
+//                 the exception: OpenMesh's STL reader merges equal corners into one vertex)
+//   triangles     every face of the file, in file order; a face of n > 3 corners becomes the
+//                 fan (c0, c_k, c_k+1), k = 1 … n−2 (exact for convex faces, not for concave
+//                 ones); a face that repeats a vertex is kept as it is (its degenerate
+//                 triangles are never hit)
+//   normals       per corner, when the file has vertex normals (PLY nx/ny/nz, NOFF, OBJ vn,
+//                 OM vertex normals); OBJ's per-corner vn are kept per corner
+//   uvs           per corner, when the file has texture coordinates: per corner (OBJ vt, OM
+//                 halfedge texture coordinates) or per vertex (PLY u/v or s/t, STOFF, OM)
+// STL facet normals and colours of any format are not read.
+//
+// No face is lost on the way. OpenMesh's importer drops faces with a vertex index out of range
+// or a repeated vertex, and re-adds a face it cannot connect ("complex edge", non-manifold) on
+// copies of its vertices, both with a note on std::cerr only. This loader records each face as
+// the reader hands it over, before OpenMesh's connectivity, so non-manifold faces keep their
+// vertices; it checks the number of faces read against the number the file declares (PLY and
+// OFF headers, binary STL and OM headers, `f` lines of OBJ, `facet`s of ASCII STL) and throws
+// if they differ.
+//
+// Before OpenMesh sees a file it is checked here, so that bad input gives a clear message with
+// a line (text formats) or an element (binary formats) instead of OpenMesh's silent misreads:
+// empty files; ASCII OFF (header counts, every vertex line's three coordinates finite, every
+// face's corner count and indices in range, truncation); PLY ASCII and binary (header, every
+// element walked: truncation, x/y/z finite, face indices in range); STL (binary size against its
+// triangle count, coordinates finite; ASCII vertex lines finite); OBJ (v lines finite, face
+// indices in range, faces of fewer than three corners); OM (header present, face count).
+// Binary OFF ("OFF BINARY") is handed to OpenMesh unchecked; its result still passes the face
+// count and scene::add_mesh's checks (indices in range, coordinates finite).
+//
+// A file with vertices but no faces (a PLY point cloud) loads as a mesh without triangles:
+// compile() drops it, and reports "nothing to trace" when nothing else is in the scene.
+// OpenMesh's messages (its omerr() stream) are captured during the read, kept off std::cerr,
+// and quoted in the error when reading fails. Reads are serialised (OpenMesh's reader registry
+// and message streams are process-wide).
+module;
+#include <cstddef>
+#include <filesystem>
+#include <string>
+export module canopy.plugins.openmesh;
+import canopy.scene;
+
+export namespace canopy {
+
+// One file read, and what the reading did.
+struct openmesh_read_result {
+    mesh_data mesh;
+    std::size_t faces = 0;            // faces in the file (= faces read)
+    std::size_t polygons = 0;         // faces of more than three corners, fan-triangulated
+    std::size_t degenerate_faces = 0; // faces that repeat a vertex (kept)
+    std::size_t nonmanifold_faces = 0; // faces OpenMesh could not connect (kept on their own vertices)
+    bool vertex_normals = false;      // the file has normals (mesh.normals is filled)
+    bool texcoords = false;           // the file has texture coordinates (mesh.uvs is filled)
+};
+
+// Reads a .ply .off .stl .om or .obj file (by extension, case-insensitive). Throws scene_error
+// naming the file, and the line or element where known, on any bad input (see above).
+openmesh_read_result read_openmesh(std::filesystem::path const& file);
+
+// The loader: the mesh under a group named after the file; returns the group.
+node_id load_openmesh(scene& s, std::filesystem::path const& file, node_id parent);
+
+void register_openmesh_plugin(registry& r);
+
+} // namespace canopy

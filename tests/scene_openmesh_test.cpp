@@ -1,0 +1,748 @@
+// Tests of the openmesh plugin (canopy.plugins.openmesh). Real meshes from Debian packages (the
+// Stanford bunny of glmark2-data, closed OFF meshes of libcgal-demo) are checked against this
+// file's own reading of them: face counts, bounds, closedness; closed meshes are compiled and
+// rays from points inside (verified by a parity count) must all hit, at the hit a brute-force
+// loop over the triangles finds. Each format (PLY ASCII and binary, OFF, STL ASCII and binary,
+// OM written with OpenMesh, OBJ) is written here with known content and read back. Malformed
+// files — generated here, and the odd ones of assimp-testmodels — must give a scene_error
+// naming the file.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <map>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+#include <unistd.h>
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
+
+import canopy.scene;
+import canopy.plugins.openmesh;
+
+namespace {
+
+namespace fs = std::filesystem;
+using canopy::vec2;
+using canopy::vec3;
+
+struct temp_folder {
+    fs::path path;
+    temp_folder() : path(fs::temp_directory_path() / ("canopy_openmesh_test_" + std::to_string(::getpid()))) {
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~temp_folder() {
+        std::error_code ignored;
+        fs::remove_all(path, ignored);
+    }
+    temp_folder(temp_folder const&) = delete;
+    temp_folder& operator=(temp_folder const&) = delete;
+};
+
+void write_file(fs::path const& p, std::string const& content) {
+    std::ofstream out(p, std::ios::binary);
+    out << content;
+}
+
+std::string read_file(fs::path const& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+canopy::registry const& openmesh_registry() {
+    static canopy::registry const r = [] {
+        canopy::registry reg;
+        canopy::register_openmesh_plugin(reg);
+        return reg;
+    }();
+    return r;
+}
+
+// Loads through the registry (plugin "openmesh") and returns the one mesh it made.
+canopy::mesh_data load_mesh(fs::path const& file, canopy::scene& s) {
+    auto const group = openmesh_registry().load(s, file, s.root(), "openmesh");
+    REQUIRE(s.at(group).name == file.filename().string());
+    REQUIRE(s.at(group).children.size() == 1);
+    REQUIRE(s.meshes().size() == 1);
+    return s.meshes()[0];
+}
+
+// The loader's error for `file`: a scene_error whose message names the file and says `problem`.
+void require_error(fs::path const& file, std::string const& problem) {
+    canopy::scene s;
+    auto const nodes = s.nodes().size();
+    try {
+        openmesh_registry().load(s, file, s.root(), "openmesh");
+        FAIL("no error for " << file);
+    } catch (canopy::scene_error const& e) {
+        std::string const m = e.what();
+        INFO(m);
+        CHECK(m.find(file.filename().string()) != std::string::npos);
+        CHECK(m.find(problem) != std::string::npos);
+    }
+    CHECK(s.nodes().size() == nodes);
+    CHECK(s.meshes().empty());
+}
+
+// --- Independent readings of the real meshes -------------------------------------------------
+
+struct parsed_mesh {
+    std::vector<vec3<float>> positions;
+    std::vector<std::array<std::uint32_t, 3>> triangles;
+    vec3<float> lo{std::numeric_limits<float>::max()}, hi{-std::numeric_limits<float>::max()};
+};
+
+void extend(parsed_mesh& m, vec3<float> p) {
+    m.positions.push_back(p);
+    m.lo = {std::min(m.lo.x, p.x), std::min(m.lo.y, p.y), std::min(m.lo.z, p.z)};
+    m.hi = {std::max(m.hi.x, p.x), std::max(m.hi.y, p.y), std::max(m.hi.z, p.z)};
+}
+
+// An OBJ of `v x y z` and `f a b c` lines (the bunny's form).
+parsed_mesh parse_simple_obj(fs::path const& file) {
+    parsed_mesh m;
+    std::ifstream in(file);
+    std::string line;
+    while (std::getline(in, line)) {
+        std::istringstream s(line);
+        std::string key;
+        s >> key;
+        if (key == "v") {
+            float x, y, z;
+            s >> x >> y >> z;
+            extend(m, {x, y, z});
+        } else if (key == "f") {
+            std::array<std::uint32_t, 3> t{};
+            for (auto& i : t) {
+                s >> i;
+                --i;
+            }
+            m.triangles.push_back(t);
+        }
+    }
+    return m;
+}
+
+// A triangle OFF: "OFF", counts, vertices, "3 a b c" faces.
+parsed_mesh parse_triangle_off(fs::path const& file) {
+    parsed_mesh m;
+    std::ifstream in(file);
+    std::string keyword;
+    std::size_t nv = 0, nf = 0, ne = 0;
+    in >> keyword >> nv >> nf >> ne;
+    for (std::size_t i = 0; i < nv; ++i) {
+        float x, y, z;
+        in >> x >> y >> z;
+        extend(m, {x, y, z});
+    }
+    for (std::size_t i = 0; i < nf; ++i) {
+        int n = 0;
+        std::array<std::uint32_t, 3> t{};
+        in >> n >> t[0] >> t[1] >> t[2];
+        REQUIRE(n == 3);
+        m.triangles.push_back(t);
+    }
+    REQUIRE(in);
+    return m;
+}
+
+std::size_t count_face_lines(fs::path const& file) {
+    std::ifstream in(file);
+    std::string line;
+    std::size_t n = 0;
+    while (std::getline(in, line)) n += line.rfind("f ", 0) == 0;
+    return n;
+}
+
+// Every undirected edge is shared by exactly two triangles.
+bool is_closed(std::vector<std::array<std::uint32_t, 3>> const& triangles) {
+    std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
+    for (auto const& t : triangles)
+        for (int k = 0; k < 3; ++k) {
+            auto a = t[std::size_t(k)], b = t[std::size_t((k + 1) % 3)];
+            ++edges[{std::min(a, b), std::max(a, b)}];
+        }
+    return std::all_of(edges.begin(), edges.end(), [](auto const& e) { return e.second == 2; });
+}
+
+// Crossings of the ray o + t d (t > 0) with the triangles, in double (Möller–Trumbore).
+int crossings(parsed_mesh const& m, std::array<double, 3> o, std::array<double, 3> d) {
+    auto const sub = [](std::array<double, 3> a, std::array<double, 3> b) {
+        return std::array<double, 3>{a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+    };
+    auto const cross = [](std::array<double, 3> a, std::array<double, 3> b) {
+        return std::array<double, 3>{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    };
+    auto const dot = [](std::array<double, 3> a, std::array<double, 3> b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; };
+    auto const at = [&](std::uint32_t i) {
+        return std::array<double, 3>{m.positions[i].x, m.positions[i].y, m.positions[i].z};
+    };
+    int n = 0;
+    for (auto const& t : m.triangles) {
+        auto const v0 = at(t[0]), e1 = sub(at(t[1]), v0), e2 = sub(at(t[2]), v0);
+        auto const p = cross(d, e2);
+        double const det = dot(e1, p);
+        if (det == 0.0) continue;
+        auto const s = sub(o, v0);
+        double const u = dot(s, p) / det;
+        auto const q = cross(s, e1);
+        double const v = dot(d, q) / det;
+        double const tt = dot(e2, q) / det;
+        n += u >= 0.0 && v >= 0.0 && u + v <= 1.0 && tt > 0.0;
+    }
+    return n;
+}
+
+// Points strictly inside a closed mesh: just off the centroids of random faces, on the side
+// where three random rays all cross the surface an odd number of times.
+std::vector<vec3<float>> inside_points(parsed_mesh const& m, std::size_t wanted, std::mt19937& rng) {
+    std::normal_distribution<double> gauss;
+    std::uniform_int_distribution<std::size_t> pick(0, m.triangles.size() - 1);
+    std::vector<vec3<float>> out;
+    for (int attempt = 0; attempt < 200 && out.size() < wanted; ++attempt) {
+        auto const& t = m.triangles[pick(rng)];
+        vec3<float> const a = m.positions[t[0]], b = m.positions[t[1]], c = m.positions[t[2]];
+        vec3<float> const centroid = (a + b + c) / 3.0f;
+        vec3<float> const n = cross(b - a, c - a);
+        float const size = std::sqrt(length(n));
+        if (!(size > 0.0f)) continue;
+        for (float side : {-0.05f, 0.05f}) {
+            vec3<float> const p = centroid + (side * size / length(n)) * n;
+            bool odd = true;
+            for (int k = 0; k < 3; ++k)
+                odd = odd && crossings(m, {p.x, p.y, p.z}, {gauss(rng), gauss(rng), gauss(rng)}) % 2 == 1;
+            if (odd) out.push_back(p);
+        }
+    }
+    return out;
+}
+
+struct ray_agreement {
+    int rays = 0, misses = 0, mismatches = 0;
+};
+
+// Rays in random directions from each point: closest_hit of the compiled scene against a loop
+// over every triangle with the same triangle test.
+ray_agreement shoot_from_inside(canopy::compiled_scene const& compiled, parsed_mesh const& m,
+                                std::vector<vec3<float>> const& points, int per_point, std::mt19937& rng) {
+    std::vector<canopy::triangle> triangles;
+    for (std::size_t i = 0; i < m.triangles.size(); ++i) {
+        auto const& t = m.triangles[i];
+        canopy::triangle tri{m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]};
+        tri.prim_id = std::uint32_t(i);
+        triangles.push_back(tri);
+    }
+    std::normal_distribution<float> gauss;
+    ray_agreement a;
+    for (auto const& p : points)
+        for (int k = 0; k < per_point; ++k) {
+            vec3<float> const d = normalize(vec3<float>(gauss(rng), gauss(rng), gauss(rng)));
+            canopy::ray const r{p, 0.0f, d, std::numeric_limits<float>::infinity()};
+            canopy::default_intersector isect;
+            auto const got = compiled.closest_hit(r, isect);
+            ++a.rays;
+            if (!got.hit) {
+                ++a.misses;
+                continue;
+            }
+            float best = std::numeric_limits<float>::infinity();
+            std::uint32_t best_prim = 0;
+            for (auto const& tri : triangles) {
+                auto const h = canopy::intersect(r, tri);
+                if (h.hit && (h.t < best || (h.t == best && tri.prim_id < best_prim))) {
+                    best = h.t;
+                    best_prim = tri.prim_id;
+                }
+            }
+            a.mismatches += !(got.t == best && got.prim_id == best_prim);
+        }
+    return a;
+}
+
+void check_loaded_like_parsed(canopy::mesh_data const& mesh, parsed_mesh const& parsed) {
+    REQUIRE(mesh.triangles.size() == parsed.triangles.size());
+    REQUIRE(mesh.positions.size() == parsed.positions.size());
+    CHECK(mesh.triangles == parsed.triangles);
+    vec3<float> lo{std::numeric_limits<float>::max()}, hi{-std::numeric_limits<float>::max()};
+    for (auto p : mesh.positions) {
+        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+    CHECK(lo.x == parsed.lo.x);
+    CHECK(lo.y == parsed.lo.y);
+    CHECK(lo.z == parsed.lo.z);
+    CHECK(hi.x == parsed.hi.x);
+    CHECK(hi.y == parsed.hi.y);
+    CHECK(hi.z == parsed.hi.z);
+}
+
+void check_closed_mesh_traces(fs::path const& file, parsed_mesh const& parsed, int points, int rays_per_point) {
+    INFO(file);
+    REQUIRE(is_closed(parsed.triangles));
+    canopy::scene s;
+    check_loaded_like_parsed(load_mesh(file, s), parsed);
+    auto const compiled = canopy::compile(s, {.plugins = &openmesh_registry(), .name = file.string()});
+    std::mt19937 rng(20240611);
+    auto const inside = inside_points(parsed, std::size_t(points), rng);
+    REQUIRE(inside.size() >= std::size_t(points) / 2);
+    auto const a = shoot_from_inside(compiled, parsed, inside, rays_per_point, rng);
+    INFO(a.rays << " rays from " << inside.size() << " points inside");
+    CHECK(a.rays >= rays_per_point * points / 2);
+    CHECK(a.misses == 0);
+    CHECK(a.mismatches == 0);
+}
+
+// libcgal-demo ships its meshes in data.tar.gz: the few used here are unpacked into `folder`.
+std::vector<fs::path> cgal_meshes(fs::path const& folder, std::vector<std::string> const& names) {
+    std::string command = "tar -xzf /usr/share/doc/libcgal-dev/data.tar.gz -C '" + folder.string() + "'";
+    for (auto const& n : names) command += " data/meshes/" + n;
+    REQUIRE(std::system(command.c_str()) == 0);
+    std::vector<fs::path> out;
+    for (auto const& n : names) out.push_back(folder / "data" / "meshes" / n);
+    return out;
+}
+
+} // namespace
+
+TEST_CASE("the Stanford bunny of glmark2-data loads with every face of its file, closed, and traces from inside") {
+    fs::path const bunny = "/usr/share/glmark2/models/bunny.obj";
+    REQUIRE(fs::exists(bunny));
+    parsed_mesh const parsed = parse_simple_obj(bunny);
+    std::size_t const faces = count_face_lines(bunny);
+    REQUIRE(faces == parsed.triangles.size());
+    auto const result = canopy::read_openmesh(bunny);
+    CHECK(result.faces == faces);
+    CHECK(result.mesh.triangles.size() == faces);
+    CHECK(result.polygons == 0);
+    CHECK(result.mesh.name == "bunny");
+    CHECK(result.mesh.source == bunny.string());
+    check_closed_mesh_traces(bunny, parsed, 6, 40);
+}
+
+TEST_CASE("closed OFF meshes of libcgal-demo load exactly and no ray from inside escapes") {
+    temp_folder tmp;
+    auto const files = cgal_meshes(tmp.path, {"elephant.off", "eight.off", "sphere.off"});
+    for (auto const& f : files) check_closed_mesh_traces(f, parse_triangle_off(f), 12, 60);
+}
+
+// A square pyramid: apex 4 over the quad 0 1 2 3, four triangle sides; per-vertex uv and normal.
+namespace pyramid {
+std::array<vec3<float>, 5> const positions{{{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {0, 2, 0}, {1, 1, 1.5f}}};
+std::array<vec2<float>, 5> const uvs{{{0, 0}, {1, 0}, {1, 1}, {0, 1}, {0.5f, 0.5f}}};
+std::array<vec3<float>, 5> const normals{{{0, 0, -1}, {1, 0, 0}, {0, 1, 0}, {-1, 0, 0}, {0, 0, 1}}};
+std::vector<std::vector<std::uint32_t>> const faces{{0, 3, 2, 1}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
+// The quad fanned from its first corner, then the sides.
+std::vector<std::array<std::uint32_t, 3>> const triangles{{0, 3, 2}, {0, 2, 1}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
+
+void check(canopy::mesh_data const& m, bool with_uv, bool with_normals) {
+    REQUIRE(m.positions.size() == positions.size());
+    for (std::size_t i = 0; i < positions.size(); ++i) {
+        CHECK(m.positions[i].x == positions[i].x);
+        CHECK(m.positions[i].y == positions[i].y);
+        CHECK(m.positions[i].z == positions[i].z);
+    }
+    CHECK(m.triangles == triangles);
+    REQUIRE(m.uvs.size() == (with_uv ? triangles.size() : 0));
+    REQUIRE(m.normals.size() == (with_normals ? triangles.size() : 0));
+    for (std::size_t t = 0; t < m.uvs.size(); ++t)
+        for (std::size_t k = 0; k < 3; ++k) {
+            CHECK(m.uvs[t][k].x == uvs[triangles[t][k]].x);
+            CHECK(m.uvs[t][k].y == uvs[triangles[t][k]].y);
+        }
+    for (std::size_t t = 0; t < m.normals.size(); ++t)
+        for (std::size_t k = 0; k < 3; ++k) {
+            CHECK(m.normals[t][k].x == normals[triangles[t][k]].x);
+            CHECK(m.normals[t][k].y == normals[triangles[t][k]].y);
+            CHECK(m.normals[t][k].z == normals[triangles[t][k]].z);
+        }
+}
+
+std::string ply_header(char const* format) {
+    return std::string("ply\nformat ") + format +
+           " 1.0\ncomment written by scene_openmesh_test\nelement vertex 5\nproperty float x\nproperty float y\n"
+           "property float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty float u\n"
+           "property float v\nelement face 5\nproperty list uchar int vertex_indices\nend_header\n";
+}
+
+std::string ply_ascii() {
+    std::ostringstream s;
+    s << ply_header("ascii");
+    for (std::size_t i = 0; i < 5; ++i)
+        s << positions[i].x << ' ' << positions[i].y << ' ' << positions[i].z << ' ' << normals[i].x << ' ' << normals[i].y
+          << ' ' << normals[i].z << ' ' << uvs[i].x << ' ' << uvs[i].y << '\n';
+    for (auto const& f : faces) {
+        s << f.size();
+        for (auto v : f) s << ' ' << v;
+        s << '\n';
+    }
+    return s.str();
+}
+
+template <typename T>
+void put(std::string& out, T value, bool big_endian) {
+    std::array<char, sizeof(T)> b;
+    std::memcpy(b.data(), &value, sizeof(T));
+    if (big_endian) std::reverse(b.begin(), b.end());
+    out.append(b.data(), b.size());
+}
+
+std::string ply_binary(bool big_endian) {
+    std::string s = ply_header(big_endian ? "binary_big_endian" : "binary_little_endian");
+    for (std::size_t i = 0; i < 5; ++i)
+        for (float v : {positions[i].x, positions[i].y, positions[i].z, normals[i].x, normals[i].y, normals[i].z, uvs[i].x,
+                        uvs[i].y})
+            put(s, v, big_endian);
+    for (auto const& f : faces) {
+        put(s, std::uint8_t(f.size()), big_endian);
+        for (auto v : f) put(s, std::int32_t(v), big_endian);
+    }
+    return s;
+}
+
+std::string off() {
+    std::ostringstream s;
+    s << "OFF\n# a square pyramid\n5 5 0\n";
+    for (auto const& p : positions) s << p.x << ' ' << p.y << ' ' << p.z << '\n';
+    for (auto const& f : faces) {
+        s << f.size();
+        for (auto v : f) s << ' ' << v;
+        s << '\n';
+    }
+    return s.str();
+}
+} // namespace pyramid
+
+TEST_CASE("PLY ASCII and binary (both byte orders) load positions, per-vertex normals and uvs, quads fanned") {
+    temp_folder tmp;
+    std::vector<std::pair<std::string, std::string>> const files{{"ascii.ply", pyramid::ply_ascii()},
+                                                                 {"little.ply", pyramid::ply_binary(false)},
+                                                                 {"big.ply", pyramid::ply_binary(true)}};
+    for (auto const& [name, content] : files) {
+        INFO(name);
+        write_file(tmp.path / name, content);
+        canopy::scene s;
+        pyramid::check(load_mesh(tmp.path / name, s), true, true);
+        auto const r = canopy::read_openmesh(tmp.path / name);
+        CHECK(r.faces == 5);
+        CHECK(r.polygons == 1);
+        CHECK(r.texcoords);
+        CHECK(r.vertex_normals);
+    }
+}
+
+TEST_CASE("OFF loads positions and fans polygons; faces OpenMesh cannot connect are kept on their vertices") {
+    temp_folder tmp;
+    write_file(tmp.path / "pyramid.off", pyramid::off());
+    canopy::scene s;
+    pyramid::check(load_mesh(tmp.path / "pyramid.off", s), false, false);
+
+    // Three triangles on one edge (0, 1) and a face repeating a vertex: OpenMesh's importer
+    // re-adds the non-manifold one on copied vertices and drops the degenerate one.
+    write_file(tmp.path / "fin.off", "OFF\n5 4 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n0 0 1\n"
+                                     "3 0 1 2\n3 1 0 3\n3 0 1 4\n3 2 2 4\n");
+    auto const r = canopy::read_openmesh(tmp.path / "fin.off");
+    CHECK(r.faces == 4);
+    CHECK(r.nonmanifold_faces == 1);
+    CHECK(r.degenerate_faces == 1);
+    CHECK(r.mesh.positions.size() == 5);
+    std::vector<std::array<std::uint32_t, 3>> const expected{{0, 1, 2}, {1, 0, 3}, {0, 1, 4}, {2, 2, 4}};
+    CHECK(r.mesh.triangles == expected);
+}
+
+TEST_CASE("STL ASCII and binary load every facet with its corners") {
+    temp_folder tmp;
+    std::array<std::array<vec3<float>, 3>, 3> const facets{{{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}},
+                                                           {{{1, 0, 0}, {1, 1, 0.5f}, {0, 1, 0}}},
+                                                           {{{-2, 3, 4}, {-2.5f, 3, 4}, {-2, 3.25f, 4.75f}}}}};
+    std::ostringstream ascii;
+    ascii << "solid test\n";
+    for (auto const& f : facets) {
+        ascii << "  facet normal 0 0 1\n    outer loop\n";
+        for (auto const& p : f) ascii << "      vertex " << p.x << ' ' << p.y << ' ' << p.z << '\n';
+        ascii << "    endloop\n  endfacet\n";
+    }
+    ascii << "endsolid test\n";
+    std::string binary(80, ' ');
+    binary.replace(0, 11, "solid test ");
+    pyramid::put(binary, std::uint32_t(facets.size()), false);
+    for (auto const& f : facets) {
+        for (float v : {0.0f, 0.0f, 1.0f}) pyramid::put(binary, v, false);
+        for (auto const& p : f)
+            for (float v : {p.x, p.y, p.z}) pyramid::put(binary, v, false);
+        pyramid::put(binary, std::uint16_t(0), false);
+    }
+    write_file(tmp.path / "ascii.stl", ascii.str());
+    write_file(tmp.path / "binary.stl", binary);
+    for (char const* name : {"ascii.stl", "binary.stl"}) {
+        INFO(name);
+        canopy::scene s;
+        auto const m = load_mesh(tmp.path / name, s);
+        REQUIRE(m.triangles.size() == facets.size());
+        CHECK(m.positions.size() == 7); // corners shared by facets 0 and 1 are merged by OpenMesh
+        for (std::size_t t = 0; t < facets.size(); ++t)
+            for (std::size_t k = 0; k < 3; ++k) {
+                auto const p = m.positions[m.triangles[t][k]];
+                CHECK(p.x == facets[t][k].x);
+                CHECK(p.y == facets[t][k].y);
+                CHECK(p.z == facets[t][k].z);
+            }
+        CHECK(m.uvs.empty());
+        CHECK(m.normals.empty());
+    }
+    // assimp's spider, ASCII and binary: every facet of the file, except those with two equal
+    // corners (OpenMesh's STL reader skips them; they have no area), counted here.
+    auto const degenerate = [](std::vector<float> const& corners) {
+        std::size_t n = 0;
+        auto const same = [&](std::size_t f, std::size_t a, std::size_t b) {
+            return std::equal(&corners[9 * f + 3 * a], &corners[9 * f + 3 * a + 3], &corners[9 * f + 3 * b]);
+        };
+        for (std::size_t f = 0; f < corners.size() / 9; ++f) n += same(f, 0, 1) || same(f, 0, 2) || same(f, 1, 2);
+        return n;
+    };
+    std::vector<float> ascii_corners, binary_corners;
+    std::istringstream text(read_file("/usr/share/assimp/models/STL/Spider_ascii.stl"));
+    for (std::string word; text >> word;)
+        if (word == "vertex")
+            for (int k = 0; k < 3; ++k) {
+                text >> word;
+                ascii_corners.push_back(std::strtof(word.c_str(), nullptr));
+            }
+    std::string const bin = read_file("/usr/share/assimp/models/STL/Spider_binary.stl");
+    std::uint32_t facets_in_binary = 0;
+    std::memcpy(&facets_in_binary, bin.data() + 80, 4);
+    for (std::size_t f = 0; f < facets_in_binary; ++f)
+        for (std::size_t c = 0; c < 9; ++c) {
+            float v;
+            std::memcpy(&v, bin.data() + 84 + 50 * f + 12 + 4 * c, 4);
+            binary_corners.push_back(v);
+        }
+    REQUIRE(ascii_corners.size() == 9 * std::size_t(facets_in_binary));
+    auto const from_ascii = canopy::read_openmesh("/usr/share/assimp/models/STL/Spider_ascii.stl");
+    auto const from_binary = canopy::read_openmesh("/usr/share/assimp/models/STL/Spider_binary.stl");
+    CHECK(degenerate(ascii_corners) > 0);
+    CHECK(from_ascii.mesh.triangles.size() == facets_in_binary - degenerate(ascii_corners));
+    CHECK(from_ascii.degenerate_faces == degenerate(ascii_corners));
+    CHECK(from_binary.mesh.triangles.size() == facets_in_binary - degenerate(binary_corners));
+    CHECK(from_binary.degenerate_faces == degenerate(binary_corners));
+    CHECK(canopy::read_openmesh("/usr/share/assimp/models/STL/triangle_with_two_solids.stl").mesh.triangles.size() == 2);
+    CHECK(canopy::read_openmesh("/usr/share/assimp/models/STL/triangle_with_empty_solid.stl").mesh.triangles.size() == 1);
+}
+
+TEST_CASE("OM files written by OpenMesh load with their normals and texture coordinates") {
+    temp_folder tmp;
+    using om_mesh = OpenMesh::PolyMesh_ArrayKernelT<>;
+    om_mesh m;
+    m.request_vertex_normals();
+    m.request_vertex_texcoords2D();
+    std::vector<om_mesh::VertexHandle> v;
+    for (std::size_t i = 0; i < 5; ++i) {
+        auto const& p = pyramid::positions[i];
+        v.push_back(m.add_vertex({p.x, p.y, p.z}));
+        m.set_normal(v.back(), {pyramid::normals[i].x, pyramid::normals[i].y, pyramid::normals[i].z});
+        m.set_texcoord2D(v.back(), {pyramid::uvs[i].x, pyramid::uvs[i].y});
+    }
+    for (auto const& f : pyramid::faces) {
+        std::vector<om_mesh::VertexHandle> corners;
+        for (auto i : f) corners.push_back(v[i]);
+        REQUIRE(m.add_face(corners).is_valid());
+    }
+    OpenMesh::IO::Options const options = OpenMesh::IO::Options::Binary | OpenMesh::IO::Options::VertexNormal |
+                                          OpenMesh::IO::Options::VertexTexCoord;
+    REQUIRE(OpenMesh::IO::write_mesh(m, (tmp.path / "pyramid.om").string(), options));
+
+    auto const r = canopy::read_openmesh(tmp.path / "pyramid.om");
+    CHECK(r.faces == 5);
+    CHECK(r.polygons == 1);
+    // OM stores faces by halfedges: each face may start at another corner. Compare corner sets
+    // with their attributes, triangle by triangle, against the written pyramid.
+    REQUIRE(r.mesh.triangles.size() == 6);
+    REQUIRE(r.mesh.positions.size() == 5);
+    REQUIRE(r.mesh.uvs.size() == 6);
+    REQUIRE(r.mesh.normals.size() == 6);
+    double area = 0.0;
+    for (std::size_t t = 0; t < 6; ++t)
+        for (std::size_t k = 0; k < 3; ++k) {
+            auto const i = r.mesh.triangles[t][k];
+            CHECK(r.mesh.positions[i].x == pyramid::positions[i].x);
+            CHECK(r.mesh.positions[i].y == pyramid::positions[i].y);
+            CHECK(r.mesh.positions[i].z == pyramid::positions[i].z);
+            CHECK(r.mesh.uvs[t][k].x == pyramid::uvs[i].x);
+            CHECK(r.mesh.uvs[t][k].y == pyramid::uvs[i].y);
+            CHECK(r.mesh.normals[t][k].z == pyramid::normals[i].z);
+            if (k == 0) {
+                auto const& tri = r.mesh.triangles[t];
+                auto const& p = r.mesh.positions;
+                area += 0.5 * double(length(cross(p[tri[1]] - p[tri[0]], p[tri[2]] - p[tri[0]])));
+            }
+        }
+    // The base (area 4) and four sides (each ½ · 2 · √(1.5² + 1)).
+    CHECK(area == Approx(4.0 + 4.0 * std::sqrt(1.5 * 1.5 + 1.0)));
+}
+
+TEST_CASE("OBJ through the openmesh plugin keeps per-corner texture coordinates and normals") {
+    temp_folder tmp;
+    // Vertex 0 carries different vt and vn in the two faces.
+    write_file(tmp.path / "corners.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n"
+                                         "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.25 0.75\n"
+                                         "vn 0 0 1\nvn 0 1 0\n"
+                                         "f 1/1/1 2/2/1 3/3/1 4/4/1\nf 1/5/2 5/2/2 2/3/2\n");
+    auto const r = canopy::read_openmesh(tmp.path / "corners.obj");
+    std::vector<std::array<std::uint32_t, 3>> const expected{{0, 1, 2}, {0, 2, 3}, {0, 4, 1}};
+    REQUIRE(r.mesh.triangles == expected);
+    REQUIRE(r.mesh.uvs.size() == 3);
+    REQUIRE(r.mesh.normals.size() == 3);
+    std::array<std::array<vec2<float>, 3>, 3> const uv{{{{{0, 0}, {1, 0}, {1, 1}}},
+                                                       {{{0, 0}, {1, 1}, {0, 1}}},
+                                                       {{{0.25f, 0.75f}, {1, 0}, {1, 1}}}}};
+    for (std::size_t t = 0; t < 3; ++t)
+        for (std::size_t k = 0; k < 3; ++k) {
+            CHECK(r.mesh.uvs[t][k].x == uv[t][k].x);
+            CHECK(r.mesh.uvs[t][k].y == uv[t][k].y);
+            CHECK(r.mesh.normals[t][k].z == (t < 2 ? 1.0f : 0.0f));
+            CHECK(r.mesh.normals[t][k].y == (t < 2 ? 0.0f : 1.0f));
+        }
+}
+
+TEST_CASE("missing, empty and truncated files are errors naming the file") {
+    temp_folder tmp;
+    require_error(tmp.path / "missing.ply", "not found");
+    CHECK_THROWS_AS(canopy::read_openmesh(tmp.path / "missing.off"), canopy::scene_error);
+    for (char const* name : {"empty.ply", "empty.off", "empty.stl", "empty.om", "empty.obj"}) {
+        write_file(tmp.path / name, "");
+        require_error(tmp.path / name, "empty");
+    }
+    write_file(tmp.path / "blank.off", "  \n\n");
+    require_error(tmp.path / "blank.off", "empty");
+
+    std::string const ply = pyramid::ply_binary(false);
+    write_file(tmp.path / "cut.ply", ply.substr(0, ply.size() - 7));
+    require_error(tmp.path / "cut.ply", "file ends in face 4 of 5");
+    write_file(tmp.path / "cut_vertices.ply", ply.substr(0, ply.find("end_header") + 11 + 40));
+    require_error(tmp.path / "cut_vertices.ply", "file ends in vertex 1 of 5");
+
+    std::string const stl = read_file("/usr/share/assimp/models/STL/Spider_binary.stl");
+    write_file(tmp.path / "cut.stl", stl.substr(0, stl.size() - 30));
+    require_error(tmp.path / "cut.stl", "truncated");
+    write_file(tmp.path / "short.stl", stl.substr(0, 40));
+    require_error(tmp.path / "short.stl", "too short");
+
+    std::string const off = pyramid::off();
+    write_file(tmp.path / "cut.off", off.substr(0, off.rfind("3 3 0 4")));
+    require_error(tmp.path / "cut.off", "file ends after 4 of 5 faces");
+    write_file(tmp.path / "cut.om", "OM");
+    require_error(tmp.path / "cut.om", "header");
+}
+
+TEST_CASE("NaN and infinite coordinates are errors naming the file and the place") {
+    temp_folder tmp;
+    write_file(tmp.path / "nan.off", "OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n");
+    require_error(tmp.path / "nan.off", "nan.off:4: vertex 1: coordinate 'nan' is not a finite number");
+    write_file(tmp.path / "inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n");
+    require_error(tmp.path / "inf.obj", "inf.obj:3: vertex coordinate 'inf' is not a finite number");
+    write_file(tmp.path / "huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1 1e999\nf 1 2 3\n");
+    require_error(tmp.path / "huge.obj", "huge.obj:3: vertex coordinate '1e999' is not a finite number");
+    std::string ascii = pyramid::ply_ascii();
+    ascii.replace(ascii.find("end_header\n") + 11, 1, "-inf");
+    write_file(tmp.path / "inf.ply", ascii);
+    require_error(tmp.path / "inf.ply", "vertex 0: coordinate x = '-inf' is not finite");
+
+    std::string binary = pyramid::ply_binary(false);
+    float const nan = std::numeric_limits<float>::quiet_NaN();
+    std::memcpy(binary.data() + binary.find("end_header\n") + 11 + 32 + 8, &nan, 4); // vertex 1, z
+    write_file(tmp.path / "nan.ply", binary);
+    require_error(tmp.path / "nan.ply", "vertex 1: coordinate z");
+
+    write_file(tmp.path / "nan.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 NaN\n"
+                                     "vertex 0 1 0\nendloop\nendfacet\nendsolid x\n");
+    require_error(tmp.path / "nan.stl", "nan.stl:5: coordinate 'NaN' is not a finite number");
+    std::string stl(80, ' ');
+    pyramid::put(stl, std::uint32_t(1), false);
+    for (float v : {0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, std::numeric_limits<float>::infinity(), 0.0f})
+        pyramid::put(stl, v, false);
+    pyramid::put(stl, std::uint16_t(0), false);
+    write_file(tmp.path / "inf.stl", stl);
+    require_error(tmp.path / "inf.stl", "triangle 0: corner 2 has a coordinate that is not finite");
+}
+
+TEST_CASE("vertex indices out of range and faces of fewer than three corners are errors") {
+    temp_folder tmp;
+    write_file(tmp.path / "range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
+    require_error(tmp.path / "range.off", "range.off:6: face 0: vertex index 3 is out of range (3 vertices)");
+    write_file(tmp.path / "negative.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n");
+    require_error(tmp.path / "negative.off", "vertex index -1 is out of range");
+    write_file(tmp.path / "two.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n");
+    require_error(tmp.path / "two.off", "face 0 has 2 corners");
+    write_file(tmp.path / "counts.off", "OFF 3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+    require_error(tmp.path / "counts.off", "counts from the next line");
+
+    std::string ascii = pyramid::ply_ascii();
+    ascii.replace(ascii.rfind("3 3 0 4"), 7, "3 3 0 5");
+    write_file(tmp.path / "range.ply", ascii);
+    require_error(tmp.path / "range.ply", "face 4: vertex index '5' is out of range (5 vertices)");
+    std::string binary = pyramid::ply_binary(true);
+    binary.replace(binary.size() - 4, 4, std::string("\0\0\0\7", 4)); // the last index, big-endian 7
+    write_file(tmp.path / "range_big.ply", binary);
+    require_error(tmp.path / "range_big.ply", "face 4: vertex index 7 is out of range (5 vertices)");
+
+    write_file(tmp.path / "range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n");
+    require_error(tmp.path / "range.obj", "range.obj:5: vertex index 4 is out of range");
+    write_file(tmp.path / "uv_range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n");
+    require_error(tmp.path / "uv_range.obj", "texture coordinate index 2 is out of range");
+    write_file(tmp.path / "line.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
+    require_error(tmp.path / "line.obj", "line.obj:3: face has 2 corners");
+}
+
+TEST_CASE("odd files of assimp-testmodels: invalid OFF is an error, a point cloud is a mesh without triangles") {
+    require_error("/usr/share/assimp/models/OFF/invalid.off", "the OFF counts line must hold three numbers");
+
+    // points.ply: four vertices, no face element. It loads as a mesh without triangles, which
+    // compile() drops: a scene of nothing else has nothing to trace.
+    fs::path const points = "/usr/share/assimp/models/PLY/points.ply";
+    canopy::scene s;
+    auto const mesh = load_mesh(points, s);
+    CHECK(mesh.positions.size() == 4);
+    CHECK(mesh.triangles.empty());
+    try {
+        (void)canopy::compile(s, {.plugins = &openmesh_registry(), .name = points.string()});
+        FAIL("compile accepted a scene with nothing to trace");
+    } catch (canopy::scene_error const& e) {
+        CHECK(std::string(e.what()).find("nothing to trace") != std::string::npos);
+    }
+
+    // cube_binary.ply (binary, 12 triangles) and cube_uv.ply (6 quads with u, v): counts from
+    // their headers.
+    CHECK(canopy::read_openmesh("/usr/share/assimp/models/PLY/cube_binary.ply").mesh.triangles.size() == 12);
+    auto const uv = canopy::read_openmesh("/usr/share/assimp/models/PLY/cube_uv.ply");
+    CHECK(uv.faces == 6);
+    CHECK(uv.polygons == 6);
+    CHECK(uv.mesh.triangles.size() == 12);
+    CHECK(uv.texcoords);
+}
+
+TEST_CASE("the openmesh plugin registers its extensions and keeps OpenMesh's messages off the console") {
+    auto const& r = openmesh_registry();
+    for (char const* ext : {".ply", ".off", ".stl", ".om", ".obj", ".PLY"}) CHECK(r.has_loader(ext));
+    // A face OpenMesh complains about ("complex edge") while reading: nothing may reach std::cerr.
+    temp_folder tmp;
+    write_file(tmp.path / "fin.off", "OFF\n4 3 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n3 0 1 2\n3 0 1 3\n3 1 0 3\n");
+    std::ostringstream captured;
+    auto* const old = std::cerr.rdbuf(captured.rdbuf());
+    auto const result = canopy::read_openmesh(tmp.path / "fin.off");
+    std::cerr.rdbuf(old);
+    CHECK(result.faces == 3);
+    CHECK(captured.str().empty());
+}
