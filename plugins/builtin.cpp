@@ -8,6 +8,8 @@ import canopy.plugins.oiio;
 import canopy.plugins.openmesh;
 import canopy.plugins.bench;
 import canopy.plugins.procedural;
+import canopy.plugins.obj;
+import canopy.plugins.json;
 import canopy.plugins.gltf;
 
 namespace canopy {
@@ -17,6 +19,8 @@ void register_builtin_plugins(registry& r) {
     register_openmesh_plugin(r); // before obj: the obj plugin is the default for .obj
     register_procedural_plugin(r);
     register_oiio_plugin(r);
+    register_obj_plugin(r);
+    register_json_plugin(r);
     register_gltf_plugin(r);
 }
 

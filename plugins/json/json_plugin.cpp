@@ -1,0 +1,552 @@
+// canopy.plugins.json — implementation: nlohmann-json parses, this file checks every key and
+// builds the scene (docs/scene/json.md is the format's reference).
+module;
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <map>
+#include <numbers>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+module canopy.plugins.json;
+
+namespace canopy {
+
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+// Nodes nested deeper than this are refused (the builder recurses once per level).
+constexpr int max_depth = 256;
+
+std::string type_name(json const& j) {
+    switch (j.type()) {
+    case json::value_t::null: return "null";
+    case json::value_t::object: return "an object";
+    case json::value_t::array: return "an array";
+    case json::value_t::string: return "a string";
+    case json::value_t::boolean: return "a boolean";
+    case json::value_t::number_integer:
+    case json::value_t::number_unsigned:
+    case json::value_t::number_float: return "a number";
+    default: return "binary data";
+    }
+}
+
+std::string at_index(std::string const& path, std::size_t i) { return path + "[" + std::to_string(i) + "]"; }
+std::string at_key(std::string const& path, std::string const& key) { return path.empty() ? key : path + "." + key; }
+
+// Affine map in double: rows of a 3×4 matrix.
+using rows34 = std::array<std::array<double, 4>, 3>;
+
+rows34 multiply(rows34 const& a, rows34 const& b) {
+    rows34 out{};
+    for (std::size_t i = 0; i < 3; ++i) {
+        for (std::size_t j = 0; j < 4; ++j) {
+            double v = j == 3 ? a[i][3] : 0.0;
+            for (std::size_t k = 0; k < 3; ++k) v += a[i][k] * b[k][j];
+            out[i][j] = v;
+        }
+    }
+    return out;
+}
+
+constexpr rows34 identity_rows{{{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}}};
+
+affine_transform<float> to_affine(rows34 const& m) {
+    std::array<float, 12> r{};
+    for (std::size_t i = 0; i < 3; ++i)
+        for (std::size_t j = 0; j < 4; ++j) r[4 * i + j] = float(m[i][j]);
+    return affine_transform<float>::from_rows(r);
+}
+
+// Files being loaded by this plugin on this thread (a scene referring to itself is refused).
+thread_local std::vector<std::string> files_in_progress;
+
+class builder {
+public:
+    builder(std::string const& file, registry const* r, scene& s)
+        : file_(file), folder_(fs::path(file).parent_path()), r_(r), s_(s) {}
+
+    node_id run(std::string_view text, node_id parent) {
+        json doc;
+        try {
+            doc = json::parse(text.begin(), text.end());
+        } catch (json::parse_error const& e) {
+            std::string what = e.what();
+            if (auto const close = what.find("] "); what.starts_with("[json.exception") && close != std::string::npos)
+                what = what.substr(close + 2);
+            throw scene_error(file_, "", what);
+        }
+        if (!doc.is_object()) fail("", "the document must be a JSON object, not " + type_name(doc));
+        check_keys(doc, "", {"version", "materials", "meshes", "prototypes", "nodes"});
+        if (doc.contains("version")) {
+            json const& v = doc["version"];
+            if (!v.is_number_integer() || v.get<std::int64_t>() != 1) fail("version", "must be 1 (the only version)");
+        }
+        if (json const* m = optional(doc, "materials", "")) for_each(*m, "materials", [&](json const& e, std::string const& p) { material(e, p); });
+        if (json const* m = optional(doc, "meshes", "")) for_each(*m, "meshes", [&](json const& e, std::string const& p) { mesh(e, p); });
+        if (json const* p = optional(doc, "prototypes", "")) prototypes(*p);
+        node_id const group = s_.add_group(parent, fs::path(file_).stem().string());
+        if (json const* n = optional(doc, "nodes", ""))
+            for_each(*n, "nodes", [&](json const& e, std::string const& p) { node(e, p, group, 1); });
+        return group;
+    }
+
+private:
+    [[noreturn]] void fail(std::string const& path, std::string const& problem) const {
+        throw scene_error(file_, path, problem);
+    }
+
+    // Runs f; a scene_error without a file (from the scene's checks) is given this file and
+    // path; one from another file (a mesh file, a texture, a generator) is wrapped with the path.
+    template <typename F>
+    auto at(std::string const& path, F&& f) {
+        try {
+            return f();
+        } catch (scene_error const& e) {
+            if (e.file() == file_) throw;
+            if (e.file().empty()) fail(path, e.where().empty() ? e.problem() : e.where() + ": " + e.problem());
+            fail(path, e.what());
+        }
+    }
+
+    template <typename F>
+    void for_each(json const& list, std::string const& path, F&& f) {
+        if (!list.is_array()) fail(path, "must be an array, not " + type_name(list));
+        for (std::size_t i = 0; i < list.size(); ++i) f(list[i], at_index(path, i));
+    }
+
+    void check_keys(json const& obj, std::string const& path, std::initializer_list<std::string_view> allowed) const {
+        for (auto const& [key, value] : obj.items())
+            if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
+                std::string list;
+                for (auto a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
+                fail(at_key(path, key), "unknown key (known here: " + list + ")");
+            }
+    }
+
+    json const* optional(json const& obj, char const* key, std::string const&) const {
+        auto it = obj.find(key);
+        return it == obj.end() ? nullptr : &*it;
+    }
+
+    json const& required(json const& obj, char const* key, std::string const& path) const {
+        auto it = obj.find(key);
+        if (it == obj.end()) fail(path, std::string("needs the key '") + key + "'");
+        return *it;
+    }
+
+    void require_object(json const& j, std::string const& path) const {
+        if (!j.is_object()) fail(path, "must be an object, not " + type_name(j));
+    }
+
+    std::string string(json const& j, std::string const& path) const {
+        if (!j.is_string()) fail(path, "must be a string, not " + type_name(j));
+        return j.get<std::string>();
+    }
+
+    // A number that is finite as a float.
+    float number(json const& j, std::string const& path) const {
+        if (!j.is_number()) fail(path, "must be a number, not " + type_name(j));
+        double const v = j.get<double>();
+        if (!std::isfinite(v) || std::abs(v) > double(std::numeric_limits<float>::max()))
+            fail(path, "value " + j.dump() + " is not finite as a float");
+        return float(v);
+    }
+
+    std::uint32_t index(json const& j, std::string const& path, std::uint64_t limit, std::string const& what) const {
+        if (!j.is_number_integer()) fail(path, "must be an integer, not " + (j.is_number() ? j.dump() : type_name(j)));
+        if (j.is_number_unsigned() ? j.get<std::uint64_t>() >= limit : (j.get<std::int64_t>() < 0 || std::uint64_t(j.get<std::int64_t>()) >= limit))
+            fail(path, j.dump() + " is out of range (" + what + ")");
+        return std::uint32_t(j.get<std::uint64_t>());
+    }
+
+    std::vector<float> numbers(json const& j, std::string const& path, std::size_t count) const {
+        if (!j.is_array() || (count != 0 && j.size() != count))
+            fail(path, count == 0 ? "must be an array of numbers"
+                                  : "must be an array of " + std::to_string(count) + " numbers");
+        std::vector<float> out;
+        out.reserve(j.size());
+        for (std::size_t i = 0; i < j.size(); ++i) out.push_back(number(j[i], at_index(path, i)));
+        return out;
+    }
+
+    vec3<float> vec(json const& j, std::string const& path) const {
+        auto const v = numbers(j, path, 3);
+        return {v[0], v[1], v[2]};
+    }
+
+    fs::path relative(std::string const& p) const { return folder_ / fs::path(p); }
+
+    registry const& plugins(std::string const& path, char const* what) const {
+        if (r_ == nullptr) fail(path, std::string(what) + " needs a plugin registry (none was given)");
+        return *r_;
+    }
+
+    template <typename Map>
+    std::string name_of(json const& e, std::string const& path, Map const& taken, char const* section) const {
+        std::string name = string(required(e, "name", path), at_key(path, "name"));
+        if (taken.contains(name)) fail(at_key(path, "name"), std::string("duplicate ") + section + " name '" + name + "'");
+        return name;
+    }
+
+    void material(json const& e, std::string const& path) {
+        require_object(e, path);
+        check_keys(e, path, {"name", "colour", "texture", "alphaMode", "alphaCutoff"});
+        material_data m;
+        m.name = name_of(e, path, materials_, "material");
+        if (json const* c = optional(e, "colour", path)) {
+            m.colour = vec(*c, at_key(path, "colour"));
+            if (m.colour.x < 0.0f || m.colour.y < 0.0f || m.colour.z < 0.0f)
+                fail(at_key(path, "colour"), "has a negative component");
+        }
+        if (json const* a = optional(e, "alphaMode", path)) {
+            std::string const mode = string(*a, at_key(path, "alphaMode"));
+            if (mode == "MASK") m.alpha = alpha_mode::mask;
+            else if (mode != "OPAQUE") fail(at_key(path, "alphaMode"), "'" + mode + "' is not OPAQUE or MASK");
+        }
+        if (json const* c = optional(e, "alphaCutoff", path)) {
+            m.alpha_cutoff = number(*c, at_key(path, "alphaCutoff"));
+            if (!(m.alpha_cutoff >= 0.0f && m.alpha_cutoff <= 1.0f)) fail(at_key(path, "alphaCutoff"), "must be in [0, 1]");
+        }
+        if (json const* t = optional(e, "texture", path)) {
+            std::string const p = at_key(path, "texture");
+            std::string const texture = string(*t, p);
+            registry const& r = plugins(p, "a texture");
+            m.image = at(p, [&] { return s_.add_image(r.load_image(relative(texture))); });
+        } else if (m.alpha == alpha_mode::mask) {
+            fail(at_key(path, "alphaMode"), "MASK needs a texture (its alpha is the mask)");
+        }
+        std::string name = m.name;
+        int const id = at(path, [&] { return s_.add_material(std::move(m)); });
+        materials_.emplace(std::move(name), id);
+    }
+
+    void mesh(json const& e, std::string const& path) {
+        require_object(e, path);
+        std::string name = name_of(e, path, meshes_, "mesh");
+        mesh_entry entry;
+        if (e.contains("file")) {
+            check_keys(e, path, {"name", "file", "loader"});
+            std::string const p = at_key(path, "file");
+            std::string const file = string(e["file"], p);
+            std::string loader;
+            if (json const* l = optional(e, "loader", path)) loader = string(*l, at_key(path, "loader"));
+            registry const& r = plugins(p, "a mesh file");
+            node_id const holder = s_.add_group(no_node, "mesh '" + name + "'");
+            entry.loaded = at(p, [&] { return r.load(s_, relative(file), holder, loader); });
+        } else {
+            check_keys(e, path, {"name", "positions", "indices", "uvs", "material"});
+            mesh_data m;
+            m.name = name;
+            m.source = file_;
+            std::string const pp = at_key(path, "positions"), ip = at_key(path, "indices"), up = at_key(path, "uvs");
+            auto const positions = numbers(required(e, "positions", path), pp, 0);
+            if (positions.size() % 3 != 0) fail(pp, "must hold 3 numbers per vertex (" + std::to_string(positions.size()) + " given)");
+            for (std::size_t i = 0; i < positions.size(); i += 3)
+                m.positions.push_back({positions[i], positions[i + 1], positions[i + 2]});
+            if (m.positions.size() >= std::numeric_limits<std::uint32_t>::max()) fail(pp, "too many vertices");
+            json const& indices = required(e, "indices", path);
+            if (!indices.is_array()) fail(ip, "must be an array of integers, not " + type_name(indices));
+            if (indices.size() % 3 != 0) fail(ip, "must hold 3 vertex indices per triangle (" + std::to_string(indices.size()) + " given)");
+            std::string const range = std::to_string(m.positions.size()) + " vertices";
+            for (std::size_t i = 0; i < indices.size(); i += 3)
+                m.triangles.push_back({index(indices[i], at_index(ip, i), m.positions.size(), range),
+                                       index(indices[i + 1], at_index(ip, i + 1), m.positions.size(), range),
+                                       index(indices[i + 2], at_index(ip, i + 2), m.positions.size(), range)});
+            if (json const* u = optional(e, "uvs", path)) {
+                auto const uvs = numbers(*u, up, 0);
+                if (uvs.size() != 2 * m.positions.size())
+                    fail(up, "must hold 2 numbers per vertex (" + std::to_string(uvs.size()) + " given for " + range + ")");
+                for (auto const& t : m.triangles)
+                    m.uvs.push_back({vec2<float>{uvs[2 * t[0]], uvs[2 * t[0] + 1]}, vec2<float>{uvs[2 * t[1]], uvs[2 * t[1] + 1]},
+                                     vec2<float>{uvs[2 * t[2]], uvs[2 * t[2] + 1]}});
+            }
+            if (json const* mat = optional(e, "material", path)) {
+                std::string const mp = at_key(path, "material");
+                std::string const mname = string(*mat, mp);
+                auto it = materials_.find(mname);
+                if (it == materials_.end()) fail(mp, "material '" + mname + "' is not defined");
+                m.material = it->second;
+            }
+            entry.mesh = at(path, [&] { return s_.add_mesh(std::move(m)); });
+        }
+        meshes_.emplace(std::move(name), entry);
+    }
+
+    void prototypes(json const& list) {
+        // Every prototype's root exists before any is built: instances may refer forwards, or in a cycle.
+        for_each(list, "prototypes", [&](json const& e, std::string const& path) {
+            require_object(e, path);
+            std::string name = name_of(e, path, prototypes_, "prototype");
+            node_id const root = s_.add_group(no_node, name);
+            prototypes_.emplace(std::move(name), root);
+        });
+        for_each(list, "prototypes", [&](json const& e, std::string const& path) {
+            node(e, path, prototypes_.at(e["name"].get<std::string>()), 1);
+        });
+    }
+
+    // The placement keys of transform and instance nodes: "matrix", or translate · rotate · scale.
+    affine_transform<float> placement(json const& e, std::string const& path) const {
+        bool const trs = e.contains("translate") || e.contains("rotate") || e.contains("scale");
+        if (json const* m = optional(e, "matrix", path)) {
+            if (trs) fail(at_key(path, "matrix"), "cannot be combined with translate, rotate or scale");
+            auto const v = numbers(*m, at_key(path, "matrix"), 12);
+            rows34 rows{};
+            for (std::size_t i = 0; i < 12; ++i) rows[i / 4][i % 4] = v[i];
+            return to_affine(rows);
+        }
+        rows34 t = identity_rows, r = identity_rows, s = identity_rows;
+        if (json const* j = optional(e, "translate", path)) {
+            auto const v = vec(*j, at_key(path, "translate"));
+            t[0][3] = v.x;
+            t[1][3] = v.y;
+            t[2][3] = v.z;
+        }
+        if (json const* j = optional(e, "rotate", path)) {
+            std::string const p = at_key(path, "rotate");
+            auto const v = numbers(*j, p, 4);
+            double const angle = double(v[0]) * std::numbers::pi / 180.0;
+            double x = v[1], y = v[2], z = v[3];
+            double const length = std::sqrt(x * x + y * y + z * z);
+            if (!(length > 0.0) || !std::isfinite(length)) fail(p, "the rotation axis must not be zero");
+            x /= length;
+            y /= length;
+            z /= length;
+            // Rodrigues: R = cos θ I + sin θ [k]× + (1 − cos θ) k kᵀ.
+            double const c = std::cos(angle), sn = std::sin(angle), cc = 1.0 - c;
+            r = {{{c + x * x * cc, x * y * cc - z * sn, x * z * cc + y * sn, 0},
+                  {y * x * cc + z * sn, c + y * y * cc, y * z * cc - x * sn, 0},
+                  {z * x * cc - y * sn, z * y * cc + x * sn, c + z * z * cc, 0}}};
+        }
+        if (json const* j = optional(e, "scale", path)) {
+            std::string const p = at_key(path, "scale");
+            vec3<float> v;
+            if (j->is_number()) {
+                float const k = number(*j, p);
+                v = {k, k, k};
+            } else {
+                v = vec(*j, p);
+            }
+            s[0][0] = v.x;
+            s[1][1] = v.y;
+            s[2][2] = v.z;
+        }
+        return to_affine(multiply(t, multiply(r, s)));
+    }
+
+    void children(json const& e, std::string const& path, node_id parent, int depth) {
+        if (json const* c = optional(e, "children", path))
+            for_each(*c, at_key(path, "children"), [&](json const& child, std::string const& p) { node(child, p, parent, depth + 1); });
+    }
+
+    parameters params(json const& e, std::string const& path) const {
+        parameters out;
+        json const* p = optional(e, "params", path);
+        if (p == nullptr) return out;
+        std::string const pp = at_key(path, "params");
+        require_object(*p, pp);
+        auto const scalar = [&](json const& v, std::string const& vp) -> std::string {
+            if (v.is_string()) return v.get<std::string>();
+            if (v.is_boolean()) return v.get<bool>() ? "true" : "false";
+            if (v.is_number()) {
+                number(v, vp);
+                return v.dump();
+            }
+            fail(vp, "must be a string, number, boolean or an array of those, not " + type_name(v));
+        };
+        for (auto const& [key, value] : p->items()) {
+            std::string const vp = at_key(pp, key);
+            if (value.is_array()) {
+                std::string joined;
+                for (std::size_t i = 0; i < value.size(); ++i) {
+                    if (value[i].is_array()) fail(at_index(vp, i), "nested arrays are not parameters");
+                    joined += (i ? " " : "") + scalar(value[i], at_index(vp, i));
+                }
+                out.set(key, joined);
+            } else {
+                out.set(key, scalar(value, vp));
+            }
+        }
+        return out;
+    }
+
+    // Copies node `from` and its subtree under `parent` (a file mesh placed by a mesh node).
+    node_id clone(node_id from, node_id parent, int depth) {
+        if (depth > max_depth) fail("", "a mesh file's node tree is deeper than " + std::to_string(max_depth) + " levels");
+        canopy::node const n = s_.at(from);
+        node_id copy = no_node;
+        switch (n.kind) {
+        case node_kind::group: copy = s_.add_group(parent, n.name); break;
+        case node_kind::transform: copy = s_.add_transform(parent, n.transform, n.name); break;
+        case node_kind::mesh: copy = s_.add_mesh_node(parent, n.mesh, n.name); break;
+        case node_kind::instance: copy = s_.add_instance(parent, n.target, n.transform, n.instance_id, n.name); break;
+        case node_kind::camera: copy = s_.add_camera(parent, n.camera, n.name); break;
+        case node_kind::light: copy = s_.add_light(parent, n.light, n.name); break;
+        case node_kind::custom: copy = s_.add_custom(parent, n.custom_type, n.params, n.name); break;
+        }
+        s_.at(copy).source = n.source;
+        for (node_id k : n.children) clone(k, copy, depth + 1);
+        return copy;
+    }
+
+    void node(json const& e, std::string const& path, node_id parent, int depth) {
+        if (depth > max_depth) fail(path, "nodes are nested deeper than " + std::to_string(max_depth) + " levels");
+        require_object(e, path);
+        std::string const type = string(required(e, "type", path), at_key(path, "type"));
+        std::string name;
+        if (json const* n = optional(e, "name", path)) name = string(*n, at_key(path, "name"));
+        node_id made = no_node;
+        if (type == "group") {
+            check_keys(e, path, {"type", "name", "children"});
+            made = at(path, [&] { return s_.add_group(parent, name); });
+            children(e, path, made, depth);
+        } else if (type == "transform") {
+            check_keys(e, path, {"type", "name", "children", "matrix", "translate", "rotate", "scale"});
+            auto const xf = placement(e, path);
+            made = at(path, [&] { return s_.add_transform(parent, xf, name); });
+            children(e, path, made, depth);
+        } else if (type == "mesh") {
+            check_keys(e, path, {"type", "name", "mesh"});
+            std::string const mesh = string(required(e, "mesh", path), at_key(path, "mesh"));
+            auto it = meshes_.find(mesh);
+            if (it == meshes_.end()) fail(path, "mesh '" + mesh + "' is not defined");
+            if (it->second.loaded == no_node) {
+                made = at(path, [&] { return s_.add_mesh_node(parent, it->second.mesh, name.empty() ? mesh : name); });
+            } else {
+                made = at(path, [&] { return clone(it->second.loaded, parent, depth); });
+                s_.at(made).name = name.empty() ? mesh : name;
+            }
+        } else if (type == "instance") {
+            check_keys(e, path, {"type", "name", "target", "id", "matrix", "translate", "rotate", "scale"});
+            std::string const target = string(required(e, "target", path), at_key(path, "target"));
+            auto it = prototypes_.find(target);
+            if (it == prototypes_.end()) fail(path, "instance target '" + target + "' is not defined");
+            std::uint32_t id = instances_;
+            if (json const* i = optional(e, "id", path))
+                id = index(*i, at_key(path, "id"), std::uint64_t(std::numeric_limits<std::uint32_t>::max()) + 1, "ids are 32-bit");
+            ++instances_;
+            auto const xf = placement(e, path);
+            made = at(path, [&] { return s_.add_instance(parent, it->second, xf, id, name); });
+        } else if (type == "camera") {
+            check_keys(e, path, {"type", "name", "eye", "target", "up", "fovy"});
+            camera_data c;
+            if (json const* j = optional(e, "eye", path)) c.eye = vec(*j, at_key(path, "eye"));
+            if (json const* j = optional(e, "target", path)) c.target = vec(*j, at_key(path, "target"));
+            if (json const* j = optional(e, "up", path)) c.up = vec(*j, at_key(path, "up"));
+            if (json const* j = optional(e, "fovy", path)) c.fovy_degrees = number(*j, at_key(path, "fovy"));
+            made = at(path, [&] { return s_.add_camera(parent, c, name); });
+        } else if (type == "light") {
+            check_keys(e, path, {"type", "name", "light", "position", "direction", "colour"});
+            light_data l;
+            if (json const* j = optional(e, "light", path)) {
+                std::string const kind = string(*j, at_key(path, "light"));
+                if (kind == "point") l.kind = light_data::point;
+                else if (kind != "directional") fail(at_key(path, "light"), "'" + kind + "' is not point or directional");
+            }
+            if (json const* j = optional(e, "position", path)) l.position = vec(*j, at_key(path, "position"));
+            if (json const* j = optional(e, "direction", path)) {
+                vec3<float> const d = vec(*j, at_key(path, "direction"));
+                float const length = std::sqrt(dot(d, d));
+                if (!(length > 0.0f) || !std::isfinite(length)) fail(at_key(path, "direction"), "must not be zero");
+                l.direction = d / length;
+            }
+            if (json const* j = optional(e, "colour", path)) l.colour = vec(*j, at_key(path, "colour"));
+            made = at(path, [&] { return s_.add_light(parent, l, name); });
+        } else if (type == "generator") {
+            check_keys(e, path, {"type", "name", "generator", "params"});
+            std::string const generator = string(required(e, "generator", path), at_key(path, "generator"));
+            parameters const p = params(e, path);
+            registry const& r = plugins(path, "a generator");
+            if (!r.has_generator(generator)) fail(at_key(path, "generator"), "generator '" + generator + "' is not registered");
+            made = at(path, [&] { return r.generate(s_, generator, p, parent); });
+            if (!name.empty() && made != no_node) s_.at(made).name = name;
+        } else {
+            check_keys(e, path, {"type", "name", "params"});
+            parameters p = params(e, path);
+            if (r_ == nullptr || !r_->has_node_type(type))
+                fail(at_key(path, "type"), "'" + type +
+                                               "' is neither a built-in node type (group, transform, mesh, instance, "
+                                               "camera, light, generator) nor one a plugin registers");
+            made = at(path, [&] { return s_.add_custom(parent, type, std::move(p), name); });
+        }
+        if (made != no_node && s_.at(made).source.empty()) s_.at(made).source = file_;
+    }
+
+    struct mesh_entry {
+        std::uint32_t mesh = 0;
+        node_id loaded = no_node; // file meshes: the node the file's loader made (kept out of the tree)
+    };
+
+    std::string const& file_;
+    fs::path folder_;
+    registry const* r_;
+    scene& s_;
+    std::map<std::string, int> materials_;
+    std::map<std::string, mesh_entry> meshes_;
+    std::map<std::string, node_id> prototypes_;
+    std::uint32_t instances_ = 0;
+};
+
+} // namespace
+
+node_id parse_json_scene(std::string_view text, std::string const& file_name, registry const* r, scene& s,
+                         node_id parent) {
+    auto const mark = s.make_mark();
+    try {
+        return builder(file_name, r, s).run(text, parent);
+    } catch (scene_error const&) {
+        s.roll_back(mark);
+        throw;
+    } catch (json::exception const& e) {
+        s.roll_back(mark);
+        throw scene_error(file_name, "", e.what());
+    } catch (...) {
+        s.roll_back(mark);
+        throw;
+    }
+}
+
+node_id load_json_scene(scene& s, std::filesystem::path const& file, node_id parent, registry const& r) {
+    std::error_code ec;
+    auto const canonical = fs::weakly_canonical(file, ec);
+    std::string const key = (ec ? file : canonical).string();
+    if (std::find(files_in_progress.begin(), files_in_progress.end(), key) != files_in_progress.end())
+        throw scene_error(file.string(), "", "the scene refers to itself (through the files it loads)");
+    std::ifstream in(file, std::ios::binary);
+    std::ostringstream content;
+    if (in) content << in.rdbuf();
+    if (!in || in.bad()) throw scene_error(file.string(), "", "cannot be read");
+    files_in_progress.push_back(key);
+    try {
+        node_id const n = parse_json_scene(content.str(), file.string(), &r, s, parent);
+        files_in_progress.pop_back();
+        return n;
+    } catch (...) {
+        files_in_progress.pop_back();
+        throw;
+    }
+}
+
+void register_json_plugin(registry& r) {
+    r.add_loader(".json", "json", "Canopy JSON scene (materials, meshes, prototypes, instances, cameras, lights)",
+                 load_json_scene);
+}
+
+} // namespace canopy
