@@ -176,7 +176,7 @@ TEST_CASE(".inst through compile() gives the direct bench path's closest hits, r
         auto const a = c.closest_hit(ray, isect);
         auto const b = canopy::closest_hit(ray, &top, &top + 1);
         bool const equal = a.hit == b.hit && (!a.hit || (a.t == b.t && a.u == b.u && a.v == b.v && a.prim_id == b.prim_id &&
-                                                         a.inst_id == b.inst_id));
+                                                         a.inst_id == b.inst_id && c.instance_id(a) == b.inst_id));
         same += equal;
         if (b.hit) {
             ++hits;
@@ -186,6 +186,26 @@ TEST_CASE(".inst through compile() gives the direct bench path's closest hits, r
     CHECK(same == rays.size());
     CHECK(hits > rays.size() / 4);
     for (int n : per_instance) CHECK(n > 0); // every instance is seen, so inst ids are compared
+
+    // With other content in the scene (a mesh placed before the file, far from the rays),
+    // placement indices shift but compiled_scene::instance_id still gives the line index.
+    canopy::scene combined;
+    canopy::mesh_data far;
+    far.name = "far away";
+    far.positions = {{100, 0, 0}, {101, 0, 0}, {100, 1, 0}};
+    far.triangles = {{0, 1, 2}};
+    combined.add_mesh_node(combined.root(), combined.add_mesh(std::move(far)));
+    r.load(combined, file);
+    canopy::compiled_scene const cc = canopy::compile(combined);
+    std::size_t same_id = 0, shifted = 0;
+    for (auto const& ray : rays) {
+        auto const a = cc.closest_hit(ray, isect);
+        auto const b = canopy::closest_hit(ray, &top, &top + 1);
+        same_id += a.hit == b.hit && (!a.hit || (cc.instance_id(a) == b.inst_id && a.prim_id == b.prim_id && a.t == b.t));
+        shifted += a.hit && a.inst_id != b.inst_id;
+    }
+    CHECK(same_id == rays.size());
+    CHECK(shifted > 0);
 }
 
 TEST_CASE("bench .obj loads the strict subset: prim_id is the f line order") {
