@@ -23,6 +23,7 @@ import canopy.scene;
 import canopy.image_io;
 import canopy.plugins.oiio;
 import canopy.plugins.gltf;
+import canopy.plugins;
 
 namespace {
 
@@ -520,12 +521,19 @@ TEST_CASE("sparse accessors replace the listed elements") {
     CHECK(p[2].z == 5.0f);
 }
 
-TEST_CASE("the gltf plugin registers loaders for .gltf and .glb") {
-    CHECK(plugins().has_loader(".gltf"));
-    CHECK(plugins().has_loader(".glb"));
-    bool named = false;
-    for (auto const& l : plugins().loaders()) named |= l.name == ".glb" && l.plugin == "gltf";
-    CHECK(named);
+TEST_CASE("the builtin registry loads .gltf and .glb with the gltf plugin") {
+    canopy::registry const& builtin = canopy::builtin_registry();
+    for (canopy::registry const* registry : {&plugins(), &builtin}) {
+        CHECK(registry->has_loader(".gltf"));
+        CHECK(registry->has_loader(".glb"));
+        int named = 0;
+        for (auto const& l : registry->loaders()) named += (l.name == ".gltf" || l.name == ".glb") && l.plugin == "gltf";
+        CHECK(named == 2);
+    }
+    temp_folder dir;
+    instancing_scene const scene_file;
+    canopy::scene s = canopy::load_scene(scene_file.write_external(dir.path), canopy::builtin_registry());
+    CHECK(s.meshes().size() == 4);
 }
 
 TEST_CASE("bad glTF files give errors naming the file and the element") {

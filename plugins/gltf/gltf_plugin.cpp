@@ -347,6 +347,8 @@ private:
                             " components per element (" + std::to_string(components) + " needed)");
         std::size_t const element = size * std::size_t(components);
         count = a.count;
+        if (count > std::size_t(UINT32_MAX))
+            fail(where, what + ": count " + std::to_string(count) + " exceeds 2^32 - 1 elements");
         std::vector<double> values;
         if (a.bufferView >= 0) {
             tinygltf::BufferView const& bv = a.bufferView < int(model_.bufferViews.size())
