@@ -591,6 +591,13 @@ TEST_CASE("OM files written by OpenMesh load with their normals and texture coor
         }
     // The base (area 4) and four sides (each ½ · 2 · √(1.5² + 1)).
     CHECK(area == Approx(4.0 + 4.0 * std::sqrt(1.5 * 1.5 + 1.0)));
+
+    // Cut short after its header: OpenMesh's reader fails, or reads fewer faces than declared.
+    std::string const om = read_file(tmp.path / "pyramid.om");
+    write_file(tmp.path / "cut.om", om.substr(0, 40));
+    require_error(tmp.path / "cut.om", "OpenMesh cannot read it");
+    write_file(tmp.path / "cut.om", om.substr(0, om.size() - 20));
+    require_error(tmp.path / "cut.om", "5 of 5 faces were dropped");
 }
 
 TEST_CASE("OBJ through the openmesh plugin keeps per-corner texture coordinates and normals") {

@@ -11,7 +11,6 @@ module;
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <iostream>
 #include <iterator>
 #include <limits>
 #include <map>
@@ -560,30 +559,21 @@ private:
     std::map<int, std::size_t> face_of_handle_;
 };
 
-// OpenMesh's message streams (omerr, omlog) captured for the lifetime of this object.
+// OpenMesh's message streams (omerr, omlog) captured for the lifetime of this object: their
+// stream buffers are swapped for a string buffer. (Connecting and disconnecting targets of
+// OpenMesh's multiplexing buffer would leak one object per call in OpenMesh 9.)
 class captured_omerr {
 public:
-    captured_omerr() {
-        for (auto* stream : {&::omerr(), &::omlog()}) {
-            for (auto* target : {&std::cerr, &std::clog})
-                if (stream->disconnect(*target)) detached_.emplace_back(stream, target);
-            stream->connect(text_);
-        }
-    }
+    captured_omerr() : old_err_(::omerr().rdbuf(&text_)), old_log_(::omlog().rdbuf(&text_)) {}
     ~captured_omerr() {
-        for (auto* stream : {&::omerr(), &::omlog()}) {
-            stream->flush();
-            stream->disconnect(text_);
-        }
-        for (auto [stream, target] : detached_) stream->connect(*target);
+        ::omerr().rdbuf(old_err_);
+        ::omlog().rdbuf(old_log_);
     }
     captured_omerr(captured_omerr const&) = delete;
     captured_omerr& operator=(captured_omerr const&) = delete;
 
     // The distinct messages, in order, on one line.
-    std::string messages() {
-        ::omerr().flush();
-        ::omlog().flush();
+    std::string messages() const {
         std::string out, line;
         std::istringstream in(text_.str());
         std::vector<std::string> seen;
@@ -596,8 +586,9 @@ public:
     }
 
 private:
-    std::ostringstream text_;
-    std::vector<std::pair<OpenMesh::mostream*, std::ostream*>> detached_;
+    std::stringbuf text_;
+    std::streambuf* old_err_;
+    std::streambuf* old_log_;
 };
 
 std::mutex& openmesh_mutex() {

@@ -11,7 +11,9 @@
 //   triangles     every face of the file, in file order; a face of n > 3 corners becomes the
 //                 fan (c0, c_k, c_k+1), k = 1 … n−2 (exact for convex faces, not for concave
 //                 ones); a face that repeats a vertex is kept as it is (its degenerate
-//                 triangles are never hit)
+//                 triangles are never hit). STL: OpenMesh's STL reader skips a facet two of
+//                 whose corners are equal before any importer sees it; such facets (no area)
+//                 are counted here and reported in degenerate_faces
 //   normals       per corner, when the file has vertex normals (PLY nx/ny/nz, NOFF, OBJ vn,
 //                 OM vertex normals); OBJ's per-corner vn are kept per corner
 //   uvs           per corner, when the file has texture coordinates: per corner (OBJ vt, OM
@@ -29,7 +31,8 @@
 // Before OpenMesh sees a file it is checked here, so that bad input gives a clear message with
 // a line (text formats) or an element (binary formats) instead of OpenMesh's silent misreads:
 // empty files; ASCII OFF (header counts, every vertex line's three coordinates finite, every
-// face's corner count and indices in range, truncation); PLY ASCII and binary (header, every
+// face's corner count and indices in range, truncation; comments and blank lines are removed
+// before OpenMesh reads it, since its OFF reader takes none); PLY ASCII and binary (header, every
 // element walked: truncation, x/y/z finite, face indices in range); STL (binary size against its
 // triangle count, coordinates finite; ASCII vertex lines finite); OBJ (v lines finite, face
 // indices in range, faces of fewer than three corners); OM (header present, face count).
@@ -53,9 +56,9 @@ export namespace canopy {
 // One file read, and what the reading did.
 struct openmesh_read_result {
     mesh_data mesh;
-    std::size_t faces = 0;            // faces in the file (= faces read)
+    std::size_t faces = 0;            // faces read: all of the file's (STL: less the skipped degenerate facets)
     std::size_t polygons = 0;         // faces of more than three corners, fan-triangulated
-    std::size_t degenerate_faces = 0; // faces that repeat a vertex (kept)
+    std::size_t degenerate_faces = 0; // faces that repeat a vertex (kept), or STL facets with equal corners (skipped)
     std::size_t nonmanifold_faces = 0; // faces OpenMesh could not connect (kept on their own vertices)
     bool vertex_normals = false;      // the file has normals (mesh.normals is filled)
     bool texcoords = false;           // the file has texture coordinates (mesh.uvs is filled)
