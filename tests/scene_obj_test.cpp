@@ -141,6 +141,25 @@ TEST_CASE("obj: polygons are fanned, in file order, with negative indices relati
     }
 }
 
+TEST_CASE("obj: a polygon of 50000 corners is fanned into 49998 triangles") {
+    temp_folder tmp;
+    constexpr int n = 50000;
+    std::string text;
+    for (int i = 0; i < n; ++i) text += "v " + std::to_string(i) + " " + std::to_string(i % 7) + " 0\n";
+    text += "f";
+    for (int i = 1; i <= n; ++i) text += " " + std::to_string(i);
+    text += "\n";
+    auto const r = obj_registry();
+    canopy::scene s;
+    auto const meshes = meshes_of(s, r.load(s, tmp.write("big.obj", text)));
+    REQUIRE(meshes.size() == 1);
+    REQUIRE(meshes[0]->triangles.size() == std::size_t(n - 2));
+    auto const last = corners(*meshes[0], n - 3); // (v0, v[n-2], v[n-1])
+    CHECK(same(last[0], {0, 0, 0}));
+    CHECK(same(last[1], {float(n - 2), float((n - 2) % 7), 0}));
+    CHECK(same(last[2], {float(n - 1), float((n - 1) % 7), 0}));
+}
+
 TEST_CASE("obj: corners v/vt, v//vn and v/vt/vn give per-corner uvs (v flipped) and normals") {
     temp_folder tmp;
     auto const file = tmp.write("forms.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
