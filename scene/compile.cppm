@@ -152,6 +152,9 @@ public:
         if (groups_placed.empty()) {
             if (meshes.size() == 1 && meshes[0].where.identity) {
                 c.levels = 0;
+                compiled_mesh_of(meshes[0].mesh);
+                stats_.placements = stats_.identity_placements = 1;
+                stats_.triangles_placed = s_.meshes()[meshes[0].mesh].triangles.size();
                 decide("one mesh with an identity transform: traced directly, no top-level BVH (levels 0)");
             } else {
                 c.levels = 1;

@@ -78,8 +78,15 @@ void registry::add_generator(std::string name, std::string plugin, std::string d
     generators_[name] = {{name, std::move(plugin), std::move(description)}, std::move(f)};
 }
 
-void registry::add_node_type(std::string name, std::string plugin, std::string description, generator expand) {
+void registry::add_node_type(std::string name, std::string plugin, std::string description, node_expander expand) {
     node_types_[name] = {{name, std::move(plugin), std::move(description)}, std::move(expand)};
+}
+
+void registry::add_node_type(std::string name, std::string plugin, std::string description, generator expand) {
+    add_node_type(std::move(name), std::move(plugin), std::move(description),
+                  node_expander([g = std::move(expand)](scene& s, node_id self, parameters const& p, registry const&) {
+                      return g(s, self, p);
+                  }));
 }
 
 bool registry::has_loader(std::string_view extension) const {
@@ -165,7 +172,7 @@ void registry::expand_custom_nodes(scene& s) const {
             throw scene_error(s.at(n).source, "node '" + s.at(n).name + "'",
                               "node type '" + s.at(n).custom_type + "' is not registered by any plugin");
         parameters const params = s.at(n).params;
-        with_rollback(s, [&] { return it->second.function(s, n, params); });
+        with_rollback(s, [&] { return it->second.function(s, n, params, *this); });
     }
 }
 

@@ -50,6 +50,9 @@ using file_loader = std::function<node_id(scene& s, std::filesystem::path const&
 using image_loader = std::function<image_data(std::filesystem::path const& file)>;
 // Builds geometry under `parent` from `params`; returns the node it made.
 using generator = std::function<node_id(scene& s, node_id parent, parameters const& params)>;
+// Expands a custom node: builds its content under the node `self` from the node's parameters,
+// through the registry when it needs other plugins (generators, files).
+using node_expander = std::function<node_id(scene& s, node_id self, parameters const& params, registry const& r)>;
 
 struct registered {
     std::string name;        // extension (with dot, lower case) or generator / node type name
@@ -63,7 +66,8 @@ public:
     void add_image_loader(std::string extension, std::string plugin, image_loader f);
     void add_generator(std::string name, std::string plugin, std::string description, generator f);
     // A custom node type: `expand` builds the node's content under the node itself (parent = the
-    // custom node), from the node's parameters.
+    // custom node), from the node's parameters (a generator serves as an expander too).
+    void add_node_type(std::string name, std::string plugin, std::string description, node_expander expand);
     void add_node_type(std::string name, std::string plugin, std::string description, generator expand);
 
     // Loads a file by its extension (case-insensitive) under parent (default: the root), with
@@ -102,7 +106,7 @@ private:
     std::map<std::string, std::vector<entry<file_loader>>> loaders_; // last = default
     std::map<std::string, entry<image_loader>> image_loaders_;
     std::map<std::string, entry<generator>> generators_;
-    std::map<std::string, entry<generator>> node_types_;
+    std::map<std::string, entry<node_expander>> node_types_;
     std::vector<std::string> plugins_;
 };
 

@@ -312,6 +312,30 @@ TEST_CASE("a procedural node expands into its generator's content") {
     CHECK(expanded.at(expanded.at(n).children[0]).name == "sphere");
 }
 
+TEST_CASE("a procedural node runs a generator of another plugin through the registry") {
+    auto r = procedural_registry();
+    // A generator of another plugin: one triangle of the size given.
+    r.add_generator("unit_triangle", "test", "one triangle", [](canopy::scene& s, canopy::node_id parent,
+                                                               canopy::parameters const& p) {
+        float const size = float(p.get_number("size", 1.0, "unit_triangle"));
+        canopy::mesh_data m;
+        m.name = "triangle";
+        m.positions = {{0, 0, 0}, {size, 0, 0}, {0, size, 0}};
+        m.triangles = {{0, 1, 2}};
+        return s.add_mesh_node(parent, s.add_mesh(std::move(m)));
+    });
+    canopy::scene s;
+    s.add_custom(s.root(), "procedural", {{"generator", "unit_triangle"}, {"size", "2"}}, "tri");
+    canopy::compiled_scene const c = canopy::compile(s, {.plugins = &r});
+    REQUIRE(c.meshes.size() == 1);
+    REQUIRE(c.meshes[0].triangles.size() == 1);
+    CHECK(c.meshes[0].triangles[0].v1.x == 2.0f);
+    canopy::default_intersector isect;
+    auto const hit = c.closest_hit(canopy::ray{{0.5f, 0.5f, 1.0f}, 0.0f, {0, 0, -1}, INFINITY}, isect);
+    CHECK(hit.hit);
+    CHECK(hit.t == 1.0f);
+}
+
 TEST_CASE("procedural node errors name the node, the generator and the parameter") {
     auto const r = procedural_registry();
     auto const compiled_message = [&](canopy::parameters p) {

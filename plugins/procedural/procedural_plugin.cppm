@@ -39,7 +39,8 @@
 //
 // Node type:
 //   procedural        a custom node {generator: NAME, ...NAME's parameters} that expands into
-//                     what the generator NAME of this plugin builds (as a child of the node).
+//                     what the registered generator NAME (of any plugin) builds, as a child of
+//                     the node.
 //                     Errors name the node and its file, then the generator and parameter.
 module;
 #include <array>
@@ -327,8 +328,8 @@ constexpr std::array<procedural_generator, 4> generators{{
      generate_billboard_forest},
 }};
 
-// The `procedural` node type: {generator: NAME, ...} → generator NAME under the node.
-node_id expand_procedural_node(scene& s, node_id node, parameters const& p) {
+// The `procedural` node type: {generator: NAME, ...} → generator NAME (of any plugin) under the node.
+node_id expand_procedural_node(scene& s, node_id node, parameters const& p, registry const& r) {
     std::string const file = s.at(node).source;
     std::string const where = "node '" + s.at(node).name + "'";
     if (!p.has("generator"))
@@ -337,17 +338,16 @@ node_id expand_procedural_node(scene& s, node_id node, parameters const& p) {
     parameters rest;
     for (auto const& [key, value] : p.values())
         if (key != "generator") rest.set(key, value);
-    for (auto const& g : generators) {
-        if (name != g.name) continue;
-        try {
-            return g.build(s, node, rest);
-        } catch (scene_error const& e) {
-            throw scene_error(file, where, e.what());
-        }
+    if (!r.has_generator(name)) {
+        std::string known;
+        for (auto const& g : r.generators()) known += (known.empty() ? "" : " ") + g.name;
+        throw scene_error(file, where, "generator '" + name + "' is not registered (known: " + known + ")");
     }
-    std::string known;
-    for (auto const& g : generators) known += (known.empty() ? "" : " ") + std::string(g.name);
-    throw scene_error(file, where, "generator '" + name + "' is not one of the procedural plugin's (" + known + ")");
+    try {
+        return r.generate(s, name, rest, node);
+    } catch (scene_error const& e) {
+        throw scene_error(file, where, e.what());
+    }
 }
 
 } // namespace
