@@ -97,7 +97,7 @@ using mesh_item = item;
 
 std::string node_label(scene const& s, node_id n) {
     node const& nd = s.at(n);
-    return nd.name.empty() ? std::string(to_string(nd.kind)) + " #" + std::to_string(n) : "'" + nd.name + "'";
+    return std::string(to_string(nd.kind)) + (nd.name.empty() ? " #" + std::to_string(n) : " '" + nd.name + "'");
 }
 
 class compiler {
@@ -154,7 +154,6 @@ public:
                 c.levels = 0;
                 compiled_mesh_of(meshes[0].mesh);
                 stats_.placements = stats_.identity_placements = 1;
-                stats_.triangles_placed = s_.meshes()[meshes[0].mesh].triangles.size();
                 decide("one mesh with an identity transform: traced directly, no top-level BVH (levels 0)");
             } else {
                 c.levels = 1;
@@ -231,6 +230,15 @@ public:
             stats_.triangles_stored += md.triangles.size();
         }
         stats_.meshes_built = c.meshes.size();
+        // Triangles in the world: every placement at every level.
+        auto const triangles_of = [&](std::vector<placement> const& ps) {
+            std::size_t n = 0;
+            for (auto const& p : ps) n += c.meshes[p.index].triangles.size();
+            return n;
+        };
+        if (c.levels == 0) stats_.triangles_placed = c.meshes[0].triangles.size();
+        if (c.levels == 1) stats_.triangles_placed = triangles_of(c.top_meshes);
+        for (auto const& g : c.top_groups) stats_.triangles_placed += triangles_of(c.groups[g.index].placements);
         stats_.meshes_unreferenced = s_.meshes().size() - c.meshes.size() - empty_meshes_.size();
         stats_.meshes_empty = empty_meshes_.size();
         for (std::size_t i = 1; i < c.materials.size(); ++i) {
@@ -291,7 +299,6 @@ private:
     void add_placement(std::vector<placement>& out, mesh_item const& m) {
         out.push_back({compiled_mesh_of(m.mesh), m.where.rounded(), m.id});
         ++stats_.placements;
-        stats_.triangles_placed += s_.meshes()[m.mesh].triangles.size();
         if (out.back().transform.is_identity()) ++stats_.identity_placements;
     }
 
@@ -302,7 +309,7 @@ private:
         case node_kind::group:
         case node_kind::custom:
             if (nd.kind == node_kind::custom && nd.children.empty())
-                throw scene_error(nd.source.empty() ? o_.name : nd.source, "node " + node_label(s_, n),
+                throw scene_error(nd.source.empty() ? o_.name : nd.source, node_label(s_, n),
                                   "custom node of type '" + nd.custom_type + "' was not expanded (no plugin registry given)");
             for (node_id c : nd.children) walk(c, where, found, top);
             break;

@@ -54,8 +54,8 @@ struct compile_statistics {
     std::size_t meshes_empty = 0;         // placed but without triangles: dropped
     std::size_t subtrees_empty = 0;       // instances of subtrees without meshes: dropped
     std::size_t triangles_stored = 0;     // in built meshes
-    std::size_t triangles_placed = 0;     // counted once per placement
-    std::size_t placements = 0;           // mesh placements in the world
+    std::size_t triangles_placed = 0;     // in the world: once per placement, at every level
+    std::size_t placements = 0;           // mesh placements built (a group's count once)
     std::size_t identity_placements = 0;  // placements whose transform is not applied
     std::size_t identity_transform_nodes = 0;
     std::size_t groups = 0;               // level-2 groups (shared subtrees with several meshes)

@@ -401,14 +401,14 @@ TEST_CASE("instance cycles are errors naming the nodes on the cycle") {
     s.add_instance(s.root(), a, xf::identity(), 0);
     std::string const msg = message_of([&] { canopy::compile(s, {.name = "loop.json"}); });
     CHECK(msg.find("loop.json: instance cycle: ") == 0);
-    CHECK(msg.find("'a'") != std::string::npos);
-    CHECK(msg.find("'b'") != std::string::npos);
-    CHECK(msg.find("'a→b'") != std::string::npos);
+    CHECK(msg.find("group 'a'") != std::string::npos);
+    CHECK(msg.find("group 'b'") != std::string::npos);
+    CHECK(msg.find("instance 'a→b'") != std::string::npos);
 
     canopy::scene t; // a cycle through children alone
     node_id const g = t.add_group(t.root(), "g");
     t.attach(g, t.root());
-    CHECK(message_of([&] { canopy::compile(t); }).find("instance cycle: 'root' → 'g' → 'root'") != std::string::npos);
+    CHECK(message_of([&] { canopy::compile(t); }).find("instance cycle: group 'root' → group 'g' → group 'root'") != std::string::npos);
 }
 
 TEST_CASE("a scene with nothing to trace is an error") {
