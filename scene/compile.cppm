@@ -15,6 +15,7 @@
 //     double, rounded once);
 //   - a scene that is one untransformed group uses the group's BVH as its top level;
 //   - meshes without triangles and subtrees without meshes are dropped;
+//   - colour textures stored sRGB-encoded (image_data::srgb) are decoded to linear once, here;
 //   - the alpha-mask intersector is needed only when a placed mesh has a masked material
 //     (compile_statistics::alpha_mask_needed); kernels run without one otherwise;
 //   - custom nodes are expanded by the plugins that registered their types.
@@ -25,6 +26,7 @@
 module;
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <map>
 #include <optional>
@@ -57,6 +59,12 @@ namespace canopy {
 namespace {
 
 using xf64 = affine_transform<double>;
+
+// IEC 61966-2-1 decoding, in double, rounded once.
+float srgb_to_linear(float encoded) {
+    double const c = double(encoded);
+    return float(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+}
 
 xf64 widen(affine_transform<float> const& a) {
     return {{vec3<double>(a.linear.col0), vec3<double>(a.linear.col1), vec3<double>(a.linear.col2)},
@@ -248,7 +256,11 @@ public:
                 if (texture_of_image[std::size_t(image)] < 0) {
                     image_data const& img = s_.images()[std::size_t(image)];
                     texture_of_image[std::size_t(image)] = int(c.textures.size());
-                    c.textures.emplace_back(img.width, img.height, img.texels, sampler{filter_mode::bilinear, address_mode::wrap});
+                    std::vector<vec4<float>> texels = img.texels;
+                    if (img.srgb)
+                        for (auto& t : texels) t = {srgb_to_linear(t.x), srgb_to_linear(t.y), srgb_to_linear(t.z), t.w};
+                    c.textures.emplace_back(img.width, img.height, std::move(texels),
+                                            sampler{filter_mode::bilinear, address_mode::wrap});
                 }
                 c.materials[i].texture = texture_of_image[std::size_t(image)];
             }

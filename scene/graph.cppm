@@ -71,11 +71,16 @@ struct material_data {
     float alpha_cutoff = 0.5f;             // glTF's default
 };
 
-// An RGBA image, linear float texels, row 0 at the top (texture coordinate v = 0).
+// An RGBA image, float texels, row 0 at the top (texture coordinate v = 0). Alpha is linear
+// coverage. RGB is linear, or sRGB-encoded when `srgb` is set (the values of 8- and 16-bit image
+// files, as stored): compile() decodes colour textures to linear then, so that shading sees linear
+// colours whatever the file; loaders that read other data from an image (an alpha map's red
+// channel) use the stored values as they are.
 struct image_data {
     std::string source;
     int width = 0, height = 0;
     std::vector<vec4<float>> texels;
+    bool srgb = false;
 };
 
 struct camera_data {

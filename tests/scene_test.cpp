@@ -390,6 +390,31 @@ TEST_CASE("the alpha-mask intersector is needed only when a placed mesh has a ma
     CHECK(c.meshes[0].material == mat + 1);
 }
 
+TEST_CASE("colour textures stored sRGB-encoded are decoded to linear once, alpha as it is") {
+    canopy::scene s;
+    canopy::image_data encoded{"leaf.png", 2, 1, {canopy::vec4<float>{0.5f, 0.04f, 1.0f, 0.5f}, canopy::vec4<float>{0, 0.2f, 0.8f, 1}}, true};
+    canopy::image_data linear{"leaf.exr", 1, 1, {canopy::vec4<float>{0.5f, 0.04f, 1.0f, 0.5f}}, false};
+    int const a = s.add_material({"encoded", {1, 1, 1}, s.add_image(encoded), canopy::alpha_mode::opaque, 0.5f});
+    int const b = s.add_material({"linear", {1, 1, 1}, s.add_image(linear), canopy::alpha_mode::opaque, 0.5f});
+    auto ma = sphere("a");
+    ma.material = a;
+    auto mb = sphere("b");
+    mb.material = b;
+    s.add_mesh_node(s.root(), s.add_mesh(ma));
+    s.add_mesh_node(s.add_transform(s.root(), translate(3, 0, 0)), s.add_mesh(mb));
+    auto const c = canopy::compile(s);
+    REQUIRE(c.textures.size() == 2);
+    // IEC 61966-2-1: ((0.5 + 0.055) / 1.055)^2.4 = 0.21404114; 0.04 / 12.92 = 0.0030959752.
+    auto const t = c.textures[0].texel(0, 0);
+    CHECK(t.x == Approx(0.21404114).epsilon(1e-6));
+    CHECK(t.y == Approx(0.0030959752).epsilon(1e-6));
+    CHECK(t.z == 1.0f);
+    CHECK(t.w == 0.5f);
+    CHECK(c.textures[0].texel(1, 0).y == Approx(0.033104767).epsilon(1e-6)); // ((0.2 + 0.055) / 1.055)^2.4
+    auto const u = c.textures[1].texel(0, 0);
+    CHECK((u.x == 0.5f && u.y == 0.04f && u.z == 1.0f && u.w == 0.5f));
+}
+
 TEST_CASE("instance cycles are errors naming the nodes on the cycle") {
     canopy::scene s;
     auto const ball = s.add_mesh(sphere("ball"));

@@ -644,7 +644,9 @@ private:
             } catch (scene_error const& e) {
                 fail(where, "'" + im.uri + "': " + e.what());
             }
+            // baseColorTexture is sRGB by the glTF specification, whatever the file's tags.
             for (auto& t : out.texels) t = vec4<float>(srgb_to_linear(t.x), srgb_to_linear(t.y), srgb_to_linear(t.z), t.w);
+            out.srgb = false;
             return out;
         }
         if (im.image.empty()) fail(where, "has no image data that could be decoded");

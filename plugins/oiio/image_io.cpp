@@ -30,6 +30,11 @@ rgba_image read_image(std::filesystem::path const& path) {
     in->close();
 
     rgba_image image;
+    // Integer pixel data is sRGB by convention (PNG, JPEG, 8-bit TIFF, ...) unless the file says
+    // otherwise; float data (EXR, HDR) is linear.
+    bool const integer = spec.format.basetype == OIIO::TypeDesc::UINT8 || spec.format.basetype == OIIO::TypeDesc::UINT16;
+    std::string const space = spec.get_string_attribute("oiio:ColorSpace");
+    image.srgb = integer && space != "Linear" && space != "linear";
     image.width = spec.width;
     image.height = spec.height;
     image.pixels.resize(4 * std::size_t(spec.width) * std::size_t(spec.height));

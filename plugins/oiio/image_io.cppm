@@ -26,6 +26,7 @@ struct rgba_image {
     int width = 0;
     int height = 0;
     std::vector<float> pixels; // 4 · width · height values
+    bool srgb = false;         // read from 8/16-bit integer data not tagged linear: RGB is sRGB-encoded
 
     float* at(int x, int y) { return pixels.data() + 4 * (std::size_t(y) * std::size_t(width) + std::size_t(x)); }
     float const* at(int x, int y) const {

@@ -1,8 +1,9 @@
 // canopy.plugins.oiio — textures through OpenImageIO.
 //
 // Loads: images (.png .jpg .jpeg .exr .hdr .tif .tiff .bmp .tga .ppm .pgm .pnm .gif .webp) into
-// image_data (linear RGBA float as stored in the file, row 0 at the top; grey → RGB, missing
-// alpha → 1). Parameters: none. Errors name the file and OpenImageIO's reason.
+// image_data: RGBA float as stored in the file, row 0 at the top; grey → RGB, missing alpha → 1;
+// 8/16-bit data scaled to [0, 1] and marked srgb (unless the file tags it linear), float data
+// linear. Parameters: none. Errors name the file and OpenImageIO's reason.
 module;
 #include <filesystem>
 #include <string>
@@ -25,6 +26,7 @@ inline image_data read_texture_image(std::filesystem::path const& file) {
     out.source = file.string();
     out.width = img.width;
     out.height = img.height;
+    out.srgb = img.srgb;
     out.texels.resize(std::size_t(img.width) * std::size_t(img.height));
     for (std::size_t i = 0; i < out.texels.size(); ++i)
         out.texels[i] = {img.pixels[4 * i], img.pixels[4 * i + 1], img.pixels[4 * i + 2], img.pixels[4 * i + 3]};
