@@ -1526,27 +1526,4 @@ CANOPY_SIMD_INLINE basic_simd<float, N> as_float(basic_simd<std::int32_t, N> x) 
   return basic_simd<float, N>(detail::backend<std::int32_t, N>::as_float(x.native()));
 }
 
-// Four records of three floats (x, y, z), as SIMD lanes: lane i of result k is p_i[k]. Each p_i
-// must be readable for four floats (the fourth is loaded and ignored). Four loads and a 4 × 4
-// transpose on x86; element by element on the scalar backend.
-CANOPY_SIMD_INLINE std::array<float4, 3> load_transposed_xyz(float const* p0, float const* p1, float const* p2,
-                                                             float const* p3) {
-#if defined(CANOPY_SIMD_SSE42)
-  __m128 const a = _mm_loadu_ps(p0), b = _mm_loadu_ps(p1), c = _mm_loadu_ps(p2), d = _mm_loadu_ps(p3);
-  __m128 const ab_low = _mm_unpacklo_ps(a, b);   // a0 b0 a1 b1
-  __m128 const cd_low = _mm_unpacklo_ps(c, d);   // c0 d0 c1 d1
-  __m128 const ab_high = _mm_unpackhi_ps(a, b);  // a2 b2 a3 b3
-  __m128 const cd_high = _mm_unpackhi_ps(c, d);  // c2 d2 c3 d3
-  return {float4(_mm_movelh_ps(ab_low, cd_low)), float4(_mm_movehl_ps(cd_low, ab_low)),
-          float4(_mm_movelh_ps(ab_high, cd_high))};
-#else
-  std::array<float4, 3> r;
-  for (int k = 0; k < 3; ++k) {
-    float const lanes[4] = {p0[k], p1[k], p2[k], p3[k]};
-    r[std::size_t(k)] = float4::load(lanes);
-  }
-  return r;
-#endif
-}
-
 }  // namespace canopy::simd

@@ -868,18 +868,3 @@ TEMPLATE_TEST_CASE("templated code gives the same lanes for float and float8 ali
   check_lanewise<n>([](V x) { return clamp_then_abs(x, V(-2.0f), V(1.5f)); },
                     [](float x) { return clamp_then_abs(x, -2.0f, 1.5f); }, ops.a);
 }
-
-TEST_CASE("load_transposed_xyz turns four xyz records into x, y and z lanes", "[simd]") {
-    // Records of four floats each; the fourth is read past the record and must not show.
-    float const records[4][4] = {{1, 2, 3, -1}, {4, 5, 6, -2}, {7, 8, 9, -3}, {10, 11, 12, -4}};
-    auto const xyz = simd::load_transposed_xyz(records[0], records[1], records[2], records[3]);
-    float out[4];
-    for (int k = 0; k < 3; ++k) {
-        xyz[std::size_t(k)].store(out);
-        for (int i = 0; i < 4; ++i) CHECK(out[i] == float(3 * i + k + 1));
-    }
-    // The same record in every lane (how a short leaf fills its unused lanes).
-    auto const same = simd::load_transposed_xyz(records[2], records[2], records[2], records[2]);
-    same[1].store(out);
-    for (float x : out) CHECK(x == 8.0f);
-}

@@ -7,8 +7,6 @@
 // - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls);
 // - otherwise (double rays, packets) → the library's box test, once per child box.
 // All three compute the same conservative test (canopy.geometry:box): same hits, same order.
-// Leaves of triangles without a user's triangle hook are tested four at a time (see
-// lane_leaf_test_v); with a hook, every triangle goes through it, one at a time.
 // Every primitive goes through call_hooks_or_descend (canopy.intersector): nested BVHs and
 // instances receive the same intersector and query. Stacked entries whose entry distance lies
 // beyond the ray's current tmax are skipped (closest-hit culling). Packet rays visit a child
@@ -93,32 +91,6 @@ template <typename T, typename S, typename I>
         return test_children_each(ray, node, isect);
 }
 
-// Leaves of float triangles, traced by a scalar float ray with no triangle hook of the user's, are
-// tested four triangles at a time (canopy.geometry: intersect_watertight_lanes). Candidates are
-// then reported in triangle order, each only if it is still within the ray's tmax, which earlier
-// reports may have tightened: exactly what testing them one after another gives.
-template <typename T, typename Prim, typename I>
-inline constexpr bool lane_leaf_test_v = std::is_same_v<T, float> && std::is_same_v<Prim, basic_triangle<float>> &&
-                                         !primitive_hook_for<I, prepared_ray<float>, basic_triangle<float>>;
-
-template <typename Query>
-[[gnu::always_inline]] inline bool intersect_leaf_lanes(prepared_ray<float>& ray, basic_triangle<float> const* tris,
-                                                        std::uint32_t count, Query& query) {
-    for (std::uint32_t base = 0; base < count; base += triangle_lanes) {
-        int const n = int(count - base < std::uint32_t(triangle_lanes) ? count - base : std::uint32_t(triangle_lanes));
-        auto const h = intersect_watertight_lanes(ray, tris + base, n);
-        for (std::uint32_t m = h.mask; m != 0; m &= m - 1) {
-            int const i = std::countr_zero(m);
-            if (!(h.t[i] <= ray.tmax)) continue;
-            basic_hit_record<float> hr;
-            record_hit(hr, true, h.t[i], h.u[i], h.v[i], tris[base + std::uint32_t(i)].prim_id,
-                       tris[base + std::uint32_t(i)].geom_id);
-            if (query.report(hr, ray)) return true;
-        }
-    }
-    return false;
-}
-
 // Largest tmax over the lanes (inactive lanes hold -inf).
 template <typename T>
 auto widest_tmax(T const& tmax) {
@@ -191,9 +163,6 @@ bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) 
                 current = order[0];
                 continue;
             }
-        } else if constexpr (detail::lane_leaf_test_v<T, Prim, I>) {
-            if (detail::intersect_leaf_lanes(ray, b.primitives.data() + current.child, current.count, query))
-                return true;
         } else {
             for (std::uint32_t i = current.child, end = current.child + current.count; i < end; ++i)
                 if (call_hooks_or_descend(ray, b.primitives[i], isect, query)) return true;

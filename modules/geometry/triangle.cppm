@@ -17,7 +17,6 @@
 // Möller & Trumbore 1997 is kept as an opt-in (intersect_moller_trumbore): faster to set up, not
 // watertight.
 module;
-#include <bit>
 #include <cstdint>
 #include <limits>
 #include <type_traits>
@@ -66,13 +65,10 @@ template <typename T>
 // largest |direction| component, and the shear constants.
 template <typename T>
 struct watertight_shear {
-    // Component k of v in the permuted frame (x → kx, y → ky, z → kz). A scalar ray's shear also
-    // permutes vectors of SIMD values (several triangles against one ray).
-    template <typename V>
-        requires std::is_same_v<V, T> || (simd::simd_width_v<T> == 1 && std::is_same_v<simd::scalar_type_t<V>, T>)
-    vec3<V> permute(vec3<V> const& v) const {
+    // Component k of v in the permuted frame (x → kx, y → ky, z → kz).
+    vec3<T> permute(vec3<T> const& v) const {
         if constexpr (simd::simd_width_v<T> == 1) {
-            V const c[3] = {v.x, v.y, v.z};
+            T const c[3] = {v.x, v.y, v.z};
             return {c[kx], c[ky], c[kz]};
         } else {
             // Per lane: kz = x, y or z; (kx, ky) is the cyclic successor pair, swapped when
@@ -134,44 +130,6 @@ inline constexpr bool is_prepared_ray_v = false;
 template <typename T>
 inline constexpr bool is_prepared_ray_v<prepared_ray<T>> = true;
 
-// The arithmetic of Woop et al.'s test, shared by every form of it: T is the ray's value type;
-// V is T (one triangle) or, for a scalar ray, a SIMD type whose lanes are triangles. Lane by lane
-// the operations are the same, so each lane's result is bit-identical to the one-triangle test.
-template <typename V>
-struct watertight_terms {
-    V eu, ev, ew; // edge functions; the barycentric weights are (eu, ev, ew) / det
-    V det;
-    V t;
-    simd::mask_type_t<V> inside; // all edge functions share a sign (edges included)
-};
-
-template <typename T, typename V>
-[[gnu::always_inline]] inline watertight_terms<V> watertight_terms_of(vec3<T> const& origin,
-                                                                     watertight_shear<T> const& shear,
-                                                                     vec3<V> const& v0, vec3<V> const& v1,
-                                                                     vec3<V> const& v2) {
-    // Translate to the ray origin, permute, shear (each vertex on its own).
-    vec3<V> const o(origin);
-    vec3<V> const a = shear.permute(v0 - o);
-    vec3<V> const b = shear.permute(v1 - o);
-    vec3<V> const c = shear.permute(v2 - o);
-    V const sx(shear.sx), sy(shear.sy), sz(shear.sz);
-    V const ax = a.x - sx * a.z, ay = a.y - sy * a.z;
-    V const bx = b.x - sx * b.z, by = b.y - sy * b.z;
-    V const cx = c.x - sx * c.z, cy = c.y - sy * c.z;
-
-    // Sign-exact edge functions; inside (edges included) when all share a sign.
-    watertight_terms<V> w;
-    w.eu = difference_of_products(cx, by, cy, bx);
-    w.ev = difference_of_products(ax, cy, ay, cx);
-    w.ew = difference_of_products(bx, ay, by, ax);
-    w.inside = ((w.eu >= V(0)) & (w.ev >= V(0)) & (w.ew >= V(0))) | ((w.eu <= V(0)) & (w.ev <= V(0)) & (w.ew <= V(0)));
-    w.det = w.eu + w.ev + w.ew;
-    V const scaled_t = w.eu * (sz * a.z) + w.ev * (sz * b.z) + w.ew * (sz * c.z);
-    w.t = scaled_t / w.det;
-    return w;
-}
-
 // Woop et al.'s test for a ray whose shear is already known.
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
@@ -179,59 +137,31 @@ template <typename T, typename S>
                                                                        watertight_shear<T> const& shear,
                                                                        basic_triangle<S> const& tri) {
     basic_hit_record<T> hr;
-    auto const w = watertight_terms_of(ray.origin, shear, vec3<T>(tri.v0), vec3<T>(tri.v1), vec3<T>(tri.v2));
-    if (simd::none(w.inside)) return hr;
-    auto const hit = w.inside & (w.det != T(0)) & (w.t >= ray.tmin) & (w.t <= ray.tmax);
+
+    // Translate to the ray origin, permute, shear (each vertex on its own).
+    vec3<T> const a = shear.permute(vec3<T>(tri.v0) - ray.origin);
+    vec3<T> const b = shear.permute(vec3<T>(tri.v1) - ray.origin);
+    vec3<T> const c = shear.permute(vec3<T>(tri.v2) - ray.origin);
+    T const ax = a.x - shear.sx * a.z, ay = a.y - shear.sy * a.z;
+    T const bx = b.x - shear.sx * b.z, by = b.y - shear.sy * b.z;
+    T const cx = c.x - shear.sx * c.z, cy = c.y - shear.sy * c.z;
+
+    // Sign-exact edge functions; inside (edges included) when all share a sign.
+    T const eu = difference_of_products(cx, by, cy, bx);
+    T const ev = difference_of_products(ax, cy, ay, cx);
+    T const ew = difference_of_products(bx, ay, by, ax);
+    auto const inside = ((eu >= T(0)) & (ev >= T(0)) & (ew >= T(0))) |
+                        ((eu <= T(0)) & (ev <= T(0)) & (ew <= T(0)));
+    if (simd::none(inside)) return hr;
+
+    T const det = eu + ev + ew;
+    T const scaled_t = eu * (shear.sz * a.z) + ev * (shear.sz * b.z) + ew * (shear.sz * c.z);
+    T const t = scaled_t / det;
+    auto const hit = inside & (det != T(0)) & (t >= ray.tmin) & (t <= ray.tmax);
     if (simd::none(hit) || is_degenerate(tri)) return hr;
-    record_hit(hr, hit, w.t, w.ev / w.det, w.ew / w.det, tri.prim_id, tri.geom_id);
+
+    record_hit(hr, hit, t, ev / det, ew / det, tri.prim_id, tri.geom_id);
     return hr;
-}
-
-// Up to four triangles against one scalar float ray at once (the leaf test of traversal when no
-// hook of the user's is in the way). Lane i (i < count) is bit-identical to
-// intersect_watertight(ray, ray.shear, tris[i]): bit i of `mask` is set when that test hits, with
-// its t, u, v in the arrays.
-struct triangle_lanes_hits {
-    std::uint32_t mask = 0;
-    alignas(16) float t[4];
-    alignas(16) float u[4];
-    alignas(16) float v[4];
-};
-
-inline constexpr int triangle_lanes = 4;
-
-[[gnu::always_inline]] inline triangle_lanes_hits intersect_watertight_lanes(prepared_ray<float> const& ray,
-                                                                           basic_triangle<float> const* tris,
-                                                                           int count) {
-    using simd::float4;
-    // Vertices of the lanes as SIMD values; lanes past `count` repeat the last triangle. (Each
-    // vertex load reads four floats: the fourth is the next member of the triangle.)
-    basic_triangle<float> const& t0 = tris[0];
-    basic_triangle<float> const& t1 = tris[count > 1 ? 1 : 0];
-    basic_triangle<float> const& t2 = tris[count > 2 ? 2 : count - 1];
-    basic_triangle<float> const& t3 = tris[count > 3 ? 3 : count - 1];
-    auto const vertex = [&](vec3<float> basic_triangle<float>::*v) {
-        auto const x = simd::load_transposed_xyz(&(t0.*v).x, &(t1.*v).x, &(t2.*v).x, &(t3.*v).x);
-        return vec3<float4>(x[0], x[1], x[2]);
-    };
-    vec3<float4> const v0 = vertex(&basic_triangle<float>::v0);
-    vec3<float4> const v1 = vertex(&basic_triangle<float>::v1);
-    vec3<float4> const v2 = vertex(&basic_triangle<float>::v2);
-    static_assert(sizeof(vec3<float>) == 3 * sizeof(float) && sizeof(basic_triangle<float>) >= 10 * sizeof(float),
-                  "load_transposed_xyz reads one float past each vertex: it must stay inside the triangle");
-    auto const w = watertight_terms_of(ray.origin, ray.shear, v0, v1, v2);
-    triangle_lanes_hits h;
-    auto const hit = w.inside & (w.det != float4(0.0f)) & (w.t >= float4(ray.tmin)) & (w.t <= float4(ray.tmax));
-    h.mask = simd::movemask(hit) & ((1u << count) - 1u);
-    if (h.mask == 0) return h;
-    w.t.store_aligned(h.t);
-    (w.ev / w.det).store_aligned(h.u);
-    (w.ew / w.det).store_aligned(h.v);
-    for (std::uint32_t m = h.mask; m != 0; m &= m - 1) {
-        int const i = std::countr_zero(m);
-        if (is_degenerate(tris[i])) h.mask &= ~(1u << i);
-    }
-    return h;
 }
 
 // Watertight ray/triangle test (the default).
