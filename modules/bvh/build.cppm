@@ -94,8 +94,9 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
     };
     if (count == 1 || depth + 1 >= opt.max_depth) return make_leaf();
 
-    // Best binned SAH split over all three axes, binned in one pass over the primitives.
-    int const bins = opt.bins;
+    // Best binned SAH split over all three axes, binned in one pass over the primitives. Small
+    // nodes use one bin per primitive at most: the sweep costs O(bins) whatever the count.
+    int const bins = int(std::min<std::size_t>(std::size_t(opt.bins), std::max<std::size_t>(count, 2)));
     double best_cost = std::numeric_limits<double>::infinity();
     int best_axis = -1, best_split = 0;
     double const parent_area = surface_area(bounds);
