@@ -13,23 +13,20 @@
 
 import canopy.query;
 
+#include "random_support.hpp"
+
 namespace {
 
 using canopy::ray;
 using canopy::triangle;
 using canopy::vec3;
 using mesh_bvh = canopy::bvh<triangle>;
+using test_support::random_source;
 
 constexpr float inf = std::numeric_limits<float>::infinity();
 
-struct random_source {
-    std::mt19937 engine;
-    explicit random_source(std::uint32_t seed) : engine(seed) {}
-    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
-    vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
-};
-
-std::vector<triangle> triangle_soup(random_source& rng, int count, float extent, float size) {
+// test_support::triangle_soup with ids the builder must fix: every prim_id 12345, geom_id = index mod 7.
+std::vector<triangle> soup_to_renumber(random_source& rng, int count, float extent, float size) {
     std::vector<triangle> soup;
     for (int i = 0; i < count; ++i) {
         vec3<float> const c = rng.point(-extent, extent);
@@ -234,7 +231,7 @@ void check_build_contract(std::vector<triangle> const& input, mesh_bvh const& b,
 
 TEST_CASE("build_binned_sah keeps every primitive once, numbers them by input index, and bounds them") {
     random_source rng(1);
-    auto const soup = triangle_soup(rng, 2000, 10.0f, 1.0f);
+    auto const soup = soup_to_renumber(rng, 2000, 10.0f, 1.0f);
     std::vector<canopy::bvh_build_options> const variants{
         {},
         {.max_leaf_size = 1},
@@ -252,7 +249,7 @@ TEST_CASE("build_binned_sah keeps every primitive once, numbers them by input in
 
 TEST_CASE("build_binned_sah respects max_depth, where leaves may exceed max_leaf_size") {
     random_source rng(2);
-    auto const soup = triangle_soup(rng, 500, 10.0f, 1.0f);
+    auto const soup = soup_to_renumber(rng, 500, 10.0f, 1.0f);
     for (int max_depth : {1, 2, 3, 6}) {
         INFO("max_depth " << max_depth);
         canopy::bvh_build_options const options{.max_leaf_size = 2, .max_depth = max_depth};
@@ -307,7 +304,7 @@ TEST_CASE("an empty input gives an empty BVH, and queries on it miss") {
 
 TEST_CASE("compute_stats is consistent with the tree") {
     random_source rng(3);
-    auto const soup = triangle_soup(rng, 1000, 10.0f, 1.0f);
+    auto const soup = soup_to_renumber(rng, 1000, 10.0f, 1.0f);
     for (int leaf : {1, 4, 8}) {
         mesh_bvh const b = canopy::build_binned_sah(soup, {.max_leaf_size = leaf});
         canopy::sah_costs const costs{.traversal = 1.5f, .intersection = 0.5f};
@@ -371,7 +368,7 @@ TEST_CASE("coincident centroids build without crashing and split by index") {
 
 TEST_CASE("non-finite vertices do not crash the builder") {
     random_source rng(4);
-    auto soup = triangle_soup(rng, 200, 5.0f, 1.0f);
+    auto soup = soup_to_renumber(rng, 200, 5.0f, 1.0f);
     soup[3].v1.x = std::numeric_limits<float>::quiet_NaN();
     soup[50].v2 = vec3<float>(std::numeric_limits<float>::quiet_NaN());
     soup[51].v0.y = inf;
@@ -403,7 +400,7 @@ TEST_CASE("BVHs over spheres and over BVHs satisfy the same contract") {
     check_wide_tree(b);
 
     std::vector<mesh_bvh> parts;
-    for (int k = 0; k < 5; ++k) parts.push_back(canopy::build_binned_sah(triangle_soup(rng, 100, 3.0f, 0.5f)));
+    for (int k = 0; k < 5; ++k) parts.push_back(canopy::build_binned_sah(soup_to_renumber(rng, 100, 3.0f, 0.5f)));
     auto const roots = canopy::build_binned_sah(parts);
     walk_result const wr = walk(roots);
     CHECK(wr.structure_ok);
@@ -415,7 +412,7 @@ TEST_CASE("BVHs over spheres and over BVHs satisfy the same contract") {
 
 TEST_CASE("instance bounds hold the transformed geometry") {
     random_source rng(6);
-    auto const soup = triangle_soup(rng, 300, 2.0f, 0.5f);
+    auto const soup = soup_to_renumber(rng, 300, 2.0f, 0.5f);
     mesh_bvh const b = canopy::build_binned_sah(soup);
     using mesh_instance = canopy::instance<mesh_bvh>;
     CHECK(canopy::instance_nesting_v<triangle> == 0);

@@ -15,40 +15,23 @@
 
 import canopy.geometry;
 
+#include "random_support.hpp"
+
 namespace {
 
 using canopy::ray;
 using canopy::triangle;
 using canopy::vec3;
 using float8 = canopy::simd::float8;
+using test_support::make_ray;
+using test_support::random_source;
 
 constexpr float inf = std::numeric_limits<float>::infinity();
 constexpr float quiet_nan = std::numeric_limits<float>::quiet_NaN();
 
-ray make_ray(vec3<float> origin, vec3<float> direction, float tmin = 0.0f, float tmax = inf) {
-    return {origin, tmin, direction, tmax};
-}
-
 std::uint32_t bits(float x) { return std::bit_cast<std::uint32_t>(x); }
 
 bool same_point(vec3<float> a, vec3<float> b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
-
-// Deterministic random numbers (fixed seeds: every run tests the same cases).
-struct random_source {
-    std::mt19937 engine;
-    explicit random_source(std::uint32_t seed) : engine(seed) {}
-    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
-    int integer(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(engine); }
-    vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
-    // A multiple of 2^-k in [lo, hi]: exactly representable, differences of such values too.
-    float dyadic(float lo, float hi, int k) {
-        float const scale = std::ldexp(1.0f, k);
-        return static_cast<float>(integer(static_cast<int>(lo * scale), static_cast<int>(hi * scale))) / scale;
-    }
-    vec3<float> dyadic_point(vec3<float> lo, vec3<float> hi, int k) {
-        return {dyadic(lo.x, hi.x, k), dyadic(lo.y, hi.y, k), dyadic(lo.z, hi.z, k)};
-    }
-};
 
 // Long double vectors for the references.
 struct vec3l {

@@ -13,6 +13,8 @@
 
 import canopy.query;
 
+#include "random_support.hpp"
+
 using canopy::aabb;
 using canopy::basic_triangle;
 using canopy::intersect;
@@ -65,54 +67,11 @@ using two_level = canopy::bvh<mesh_instance>;
 using two_level_instance = canopy::instance<two_level>;
 using three_level = canopy::bvh<two_level_instance>;
 
-constexpr float inf = std::numeric_limits<float>::infinity();
-
-ray make_ray(vec3<float> origin, vec3<float> direction, float tmin = 0.0f, float tmax = inf) {
-    return {origin, tmin, direction, tmax};
-}
-
-struct random_source {
-    std::mt19937 engine;
-    explicit random_source(std::uint32_t seed) : engine(seed) {}
-    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
-    vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
-    vec3<float> point_in(canopy::aabb const& b) {
-        return {uniform(b.min.x, b.max.x), uniform(b.min.y, b.max.y), uniform(b.min.z, b.max.z)};
-    }
-};
-
-std::vector<triangle> triangle_soup(random_source& rng, int count, float extent, float size) {
-    std::vector<triangle> soup;
-    for (int i = 0; i < count; ++i) {
-        vec3<float> const c = rng.point(-extent, extent);
-        soup.push_back({c + rng.point(-size, size), c + rng.point(-size, size), c + rng.point(-size, size),
-                        std::uint32_t(i), std::uint32_t(i % 3)});
-    }
-    return soup;
-}
-
-// Rotation (random unit quaternion) × non-uniform scale, plus a translation.
-canopy::affine_transform<float> random_transform(random_source& rng, float translation) {
-    std::normal_distribution<double> normal;
-    double q[4];
-    double norm = 0;
-    for (double& c : q) {
-        c = normal(rng.engine);
-        norm += c * c;
-    }
-    for (double& c : q) c /= std::sqrt(norm);
-    double const w = q[0], x = q[1], y = q[2], z = q[3];
-    double const r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
-                            {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
-                            {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
-    double const s[3] = {rng.uniform(0.5f, 2.0f), rng.uniform(0.5f, 2.0f), rng.uniform(0.5f, 2.0f)};
-    std::array<float, 12> rows{};
-    for (int i = 0; i < 3; ++i) {
-        for (int j = 0; j < 3; ++j) rows[std::size_t(4 * i + j)] = static_cast<float>(r[i][j] * s[j]);
-        rows[std::size_t(4 * i + 3)] = rng.uniform(-translation, translation);
-    }
-    return canopy::affine_transform<float>::from_rows(rows);
-}
+using test_support::make_ray;
+using test_support::random_rays;
+using test_support::random_source;
+using test_support::random_transform;
+using test_support::triangle_soup;
 
 // Meshes, a two-level scene (instances of two meshes) and a three-level scene (instances of it).
 struct nested_scene {
@@ -133,17 +92,6 @@ struct nested_scene {
         top = canopy::build_binned_sah(level2);
     }
 };
-
-std::vector<ray> random_rays(random_source& rng, canopy::aabb const& bounds, int count) {
-    vec3<float> const c = (bounds.min + bounds.max) * 0.5f;
-    float const r = canopy::length(bounds.max - bounds.min);
-    std::vector<ray> rays;
-    for (int i = 0; i < count; ++i) {
-        vec3<float> const origin = c + rng.point(-r, r);
-        rays.push_back(make_ray(origin, rng.point_in(bounds) - origin));
-    }
-    return rays;
-}
 
 template <typename H>
 bool same_record(H const& a, H const& b) {

@@ -17,6 +17,8 @@
 
 import canopy.query;
 
+#include "random_support.hpp"
+
 namespace {
 
 using canopy::ray;
@@ -31,52 +33,14 @@ using two_level_instance = canopy::instance<two_level>;
 using three_level = canopy::bvh<two_level_instance>;
 using record = canopy::hit_record<ray, triangle>;
 
+using test_support::make_ray;
+using test_support::random_rays;
+using test_support::random_source;
+using test_support::random_transform;
+using test_support::triangle_soup;
+
 constexpr float inf = std::numeric_limits<float>::infinity();
 constexpr std::uint32_t invalid = canopy::invalid_id;
-
-ray make_ray(vec3<float> origin, vec3<float> direction, float tmin = 0.0f, float tmax = inf) {
-    return {origin, tmin, direction, tmax};
-}
-
-struct random_source {
-    std::mt19937 engine;
-    explicit random_source(std::uint32_t seed) : engine(seed) {}
-    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
-    int integer(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(engine); }
-    vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
-    vec3<float> point_in(canopy::aabb const& b) {
-        return {uniform(b.min.x, b.max.x), uniform(b.min.y, b.max.y), uniform(b.min.z, b.max.z)};
-    }
-    // A multiple of 2^-k in [lo, hi].
-    float dyadic(float lo, float hi, int k) {
-        float const scale = std::ldexp(1.0f, k);
-        return static_cast<float>(integer(static_cast<int>(lo * scale), static_cast<int>(hi * scale))) / scale;
-    }
-    vec3<float> dyadic_point(float lo, float hi, int k) { return {dyadic(lo, hi, k), dyadic(lo, hi, k), dyadic(lo, hi, k)}; }
-};
-
-// prim_id = index (what the builder assigns), geom_id = index mod 3.
-std::vector<triangle> triangle_soup(random_source& rng, int count, float extent, float size) {
-    std::vector<triangle> soup;
-    for (int i = 0; i < count; ++i) {
-        vec3<float> const c = rng.point(-extent, extent);
-        soup.push_back({c + rng.point(-size, size), c + rng.point(-size, size), c + rng.point(-size, size),
-                        std::uint32_t(i), std::uint32_t(i % 3)});
-    }
-    return soup;
-}
-
-// Rays from around the box towards random points inside it.
-std::vector<ray> random_rays(random_source& rng, canopy::aabb const& bounds, int count) {
-    vec3<float> const c = (bounds.min + bounds.max) * 0.5f;
-    float const r = canopy::length(bounds.max - bounds.min);
-    std::vector<ray> rays;
-    for (int i = 0; i < count; ++i) {
-        vec3<float> const origin = c + rng.point(-r, r);
-        rays.push_back(make_ray(origin, rng.point_in(bounds) - origin));
-    }
-    return rays;
-}
 
 // Rays from around the box towards points near the targets (instanced scenes are sparse: aiming
 // at their triangles makes most rays hit).
@@ -520,29 +484,6 @@ long double length(vec3l a) { return std::sqrt(dot(a, a)); }
 // The exact image of p under m (m's float entries taken as exact).
 vec3l apply(canopy::affine_transform<float> const& m, vec3l p) {
     return widen(m.linear.col0) * p.x + widen(m.linear.col1) * p.y + widen(m.linear.col2) * p.z + widen(m.translation);
-}
-
-// Rotation (random unit quaternion) × non-uniform scale, plus a translation.
-canopy::affine_transform<float> random_transform(random_source& rng, float translation) {
-    std::normal_distribution<double> normal;
-    double q[4];
-    double norm = 0;
-    for (double& c : q) {
-        c = normal(rng.engine);
-        norm += c * c;
-    }
-    for (double& c : q) c /= std::sqrt(norm);
-    double const w = q[0], x = q[1], y = q[2], z = q[3];
-    double const rot[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
-                              {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
-                              {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
-    double const s[3] = {rng.uniform(0.5f, 2.0f), rng.uniform(0.5f, 2.0f), rng.uniform(0.5f, 2.0f)};
-    std::array<float, 12> rows{};
-    for (int i = 0; i < 3; ++i) {
-        for (int j = 0; j < 3; ++j) rows[std::size_t(4 * i + j)] = static_cast<float>(rot[i][j] * s[j]);
-        rows[std::size_t(4 * i + 3)] = rng.uniform(-translation, translation);
-    }
-    return canopy::affine_transform<float>::from_rows(rows);
 }
 
 struct exact_world_triangle {

@@ -15,24 +15,22 @@
 #include <string>
 #include <vector>
 
+#include "test_support.hpp"
+
 import canopy.scene;
 import canopy.bench_formats;
 import canopy.procedural;
 import canopy.plugins.bench;
 
+#include "scene_support.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
+using test_support::error_of;
+using test_support::temp_folder;
 using canopy::vec3;
 using xf = canopy::affine_transform<float>;
-
-// A fresh folder for one test's files.
-fs::path temp_folder(std::string const& name) {
-    fs::path const p = fs::temp_directory_path() / ("canopy_scene_bench_test_" + name);
-    fs::remove_all(p);
-    fs::create_directories(p);
-    return p;
-}
 
 void write(fs::path const& file, std::string const& text) {
     std::ofstream out(file, std::ios::binary);
@@ -107,19 +105,11 @@ std::vector<canopy::ray> random_rays(std::uint32_t seed, std::size_t count) {
     return rays;
 }
 
-canopy::scene_error error_of(auto&& f) {
-    try {
-        f();
-    } catch (canopy::scene_error const& e) {
-        return e;
-    }
-    return canopy::scene_error("", "", "(no scene_error)");
-}
-
 } // namespace
 
 TEST_CASE(".inst loads one shared mesh and one instance node per matrix line, in file order") {
-    auto const folder = temp_folder("load");
+    temp_folder const tmp("canopy_scene_bench_test");
+    fs::path const& folder = tmp.path;
     std::size_t triangles = 0;
     auto const file = write_inst(folder, triangles);
     auto const r = bench_registry();
@@ -155,7 +145,8 @@ TEST_CASE(".inst loads one shared mesh and one instance node per matrix line, in
 }
 
 TEST_CASE(".inst through compile() gives the direct bench path's closest hits, ray by ray") {
-    auto const folder = temp_folder("trace");
+    temp_folder const tmp("canopy_scene_bench_test");
+    fs::path const& folder = tmp.path;
     std::size_t triangles = 0;
     auto const file = write_inst(folder, triangles);
     auto const r = bench_registry();
@@ -209,7 +200,8 @@ TEST_CASE(".inst through compile() gives the direct bench path's closest hits, r
 }
 
 TEST_CASE("bench .obj loads the strict subset: prim_id is the f line order") {
-    auto const folder = temp_folder("obj");
+    temp_folder const tmp("canopy_scene_bench_test");
+    fs::path const& folder = tmp.path;
     std::size_t triangles = 0;
     write(folder / "sphere.obj", sphere_obj(triangles));
     auto r = bench_registry();
@@ -248,7 +240,8 @@ TEST_CASE("bench .obj loads the strict subset: prim_id is the f line order") {
 }
 
 TEST_CASE("malformed bench files are scene errors naming the file at fault and the line") {
-    auto const folder = temp_folder("errors");
+    temp_folder const tmp("canopy_scene_bench_test");
+    fs::path const& folder = tmp.path;
     std::size_t triangles = 0;
     write(folder / "sphere.obj", sphere_obj(triangles));
     write(folder / "quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");

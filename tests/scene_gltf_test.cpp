@@ -17,7 +17,8 @@
 #include <map>
 #include <string>
 #include <vector>
-#include <unistd.h>
+
+#include "test_support.hpp"
 
 import canopy.scene;
 import canopy.image_io;
@@ -25,27 +26,15 @@ import canopy.plugins.oiio;
 import canopy.plugins.gltf;
 import canopy.plugins;
 
+#include "scene_support.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
+using test_support::temp_folder;
 using canopy::vec3;
 
 constexpr float inf = std::numeric_limits<float>::infinity();
-
-// A folder of its own for each test case, removed afterwards.
-struct temp_folder {
-    fs::path path;
-    temp_folder() : path(fs::temp_directory_path() / ("canopy_gltf_test_" + std::to_string(::getpid()))) {
-        fs::remove_all(path);
-        fs::create_directories(path);
-    }
-    ~temp_folder() {
-        std::error_code ignored;
-        fs::remove_all(path, ignored);
-    }
-    temp_folder(temp_folder const&) = delete;
-    temp_folder& operator=(temp_folder const&) = delete;
-};
 
 canopy::registry const& plugins() {
     static canopy::registry const r = [] {
@@ -389,19 +378,8 @@ void check_instancing_scene(canopy::scene const& s) {
     CHECK(c.camera->fovy_degrees == Approx(0.8 * 180.0 / 3.14159265358979));
 }
 
-// Loads `file` expecting a scene_error; returns its message (empty if none was thrown).
-std::string load_error(fs::path const& file) {
-    canopy::scene s;
-    auto const before = s.nodes().size();
-    try {
-        plugins().load(s, file);
-    } catch (canopy::scene_error const& e) {
-        CHECK(s.nodes().size() == before); // nothing half-loaded
-        CHECK(s.meshes().empty());
-        return e.what();
-    }
-    return {};
-}
+// Loads `file` expecting a scene_error (see test_support::load_failure); returns its message.
+std::string load_error(fs::path const& file) { return test_support::load_failure(plugins(), file).message; }
 
 // A one-primitive file for the error cases: a quad with u16 indices; parts replaceable.
 struct small_file {
@@ -432,7 +410,7 @@ struct small_file {
 } // namespace
 
 TEST_CASE("a glTF mesh used by several nodes is built once and placed once per node") {
-    temp_folder dir;
+    temp_folder const dir("canopy_gltf_test");
     instancing_scene const scene_file;
     canopy::scene s;
     plugins().load(s, scene_file.write_external(dir.path));
@@ -447,7 +425,7 @@ TEST_CASE("a glTF mesh used by several nodes is built once and placed once per n
 }
 
 TEST_CASE("embedded buffers and images (data: URIs) load like external ones") {
-    temp_folder dir;
+    temp_folder const dir("canopy_gltf_test");
     instancing_scene const scene_file;
     write_mask_png(dir.path / "mask.png");
     std::string const image = "\"images\": [{\"uri\": \"data:image/png;base64," + base64(read_bytes(dir.path / "mask.png")) + "\"}]";
@@ -460,7 +438,7 @@ TEST_CASE("embedded buffers and images (data: URIs) load like external ones") {
 }
 
 TEST_CASE(".glb files load, with the image in a buffer view") {
-    temp_folder dir;
+    temp_folder const dir("canopy_gltf_test");
     instancing_scene scene_file;
     write_mask_png(dir.path / "mask.png");
     auto const png = read_bytes(dir.path / "mask.png");
@@ -477,7 +455,7 @@ TEST_CASE(".glb files load, with the image in a buffer view") {
 }
 
 TEST_CASE("a node with a multi-primitive mesh holds a group of one mesh node per primitive") {
-    temp_folder dir;
+    temp_folder const dir("canopy_gltf_test");
     instancing_scene const scene_file;
     canopy::scene s;
     plugins().load(s, scene_file.write_external(dir.path));
@@ -496,7 +474,7 @@ TEST_CASE("a node with a multi-primitive mesh holds a group of one mesh node per
 }
 
 TEST_CASE("sparse accessors replace the listed elements") {
-    temp_folder dir;
+    temp_folder const dir("canopy_gltf_test");
     gltf_builder b;
     int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
     int const sparse_index = b.add_view(std::vector<std::uint8_t>{2}.data(), 1);
@@ -530,14 +508,14 @@ TEST_CASE("the builtin registry loads .gltf and .glb with the gltf plugin") {
         for (auto const& l : registry->loaders()) named += (l.name == ".gltf" || l.name == ".glb") && l.plugin == "gltf";
         CHECK(named == 2);
     }
-    temp_folder dir;
+    temp_folder const dir("canopy_gltf_test");
     instancing_scene const scene_file;
     canopy::scene s = canopy::load_scene(scene_file.write_external(dir.path), canopy::builtin_registry());
     CHECK(s.meshes().size() == 4);
 }
 
 TEST_CASE("bad glTF files give errors naming the file and the element") {
-    temp_folder dir;
+    temp_folder const dir("canopy_gltf_test");
     auto const expect = [&](fs::path const& file, std::vector<std::string> const& parts) {
         std::string const message = load_error(file);
         INFO(message);

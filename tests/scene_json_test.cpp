@@ -12,7 +12,8 @@
 #include <fstream>
 #include <string>
 #include <vector>
-#include <unistd.h>
+
+#include "test_support.hpp"
 
 import canopy.scene;
 import canopy.plugins.json;
@@ -20,31 +21,14 @@ import canopy.plugins.obj;
 import canopy.plugins.oiio;
 import canopy.image_io;
 
+#include "scene_support.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
+using test_support::load_failure;
+using test_support::temp_folder;
 using canopy::vec3;
-
-struct temp_folder {
-    fs::path path;
-    temp_folder() : path(fs::temp_directory_path() / ("canopy_json_test_" + std::to_string(::getpid()))) {
-        fs::remove_all(path);
-        fs::create_directories(path);
-    }
-    ~temp_folder() {
-        std::error_code ignored;
-        fs::remove_all(path, ignored);
-    }
-    temp_folder(temp_folder const&) = delete;
-    temp_folder& operator=(temp_folder const&) = delete;
-
-    fs::path write(std::string const& name, std::string const& text) const {
-        fs::path const p = path / name;
-        fs::create_directories(p.parent_path());
-        std::ofstream(p, std::ios::binary) << text;
-        return p;
-    }
-};
 
 // The parameters the test generator and node type were last called with.
 canopy::parameters last_generator_params, last_node_params;
@@ -83,31 +67,10 @@ canopy::node_id child_named(canopy::scene const& s, canopy::node_id parent, std:
     return canopy::no_node;
 }
 
-struct failure {
-    std::string file, where, problem;
-};
-
-failure load_failure(canopy::registry const& r, fs::path const& file) {
-    canopy::scene s;
-    s.add_group(s.root(), "before");
-    auto const nodes = s.nodes().size();
-    try {
-        r.load(s, file);
-    } catch (canopy::scene_error const& e) {
-        CHECK(s.nodes().size() == nodes);
-        CHECK(s.meshes().empty());
-        CHECK(s.materials().empty());
-        CHECK(s.images().empty());
-        return {e.file(), e.where(), e.problem()};
-    }
-    FAIL("no scene_error for " << file);
-    return {};
-}
-
 } // namespace
 
 TEST_CASE("json: inline meshes, materials and transforms hold the values written") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_json_test");
     auto const file = tmp.write("inline.json", R"({
       "materials": [{"name": "red", "colour": [1, 0, 0]}, {"name": "plain"}],
       "meshes": [{"name": "tri", "material": "red", "positions": [0,0,0, 1,0,0, 0,1,0, 5,5,5],
@@ -168,7 +131,7 @@ TEST_CASE("json: inline meshes, materials and transforms hold the values written
 }
 
 TEST_CASE("json: file meshes and textures load through the registry, relative to the JSON file") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_json_test");
     tmp.write("models/quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
     canopy::rgba_image img;
     img.width = 2;
@@ -217,7 +180,7 @@ TEST_CASE("json: file meshes and textures load through the registry, relative to
 }
 
 TEST_CASE("json: instances target prototypes by name; ids default to the count of instances before them") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_json_test");
     auto const file = tmp.write("instances.json", R"({
       "meshes": [{"name": "tri", "positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]}],
       "prototypes": [
@@ -257,7 +220,7 @@ TEST_CASE("json: instances target prototypes by name; ids default to the count o
 }
 
 TEST_CASE("json: instance cycles reach the graph and compile reports them") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_json_test");
     auto const file = tmp.write("cycle.json", R"({
       "prototypes": [
         {"name": "a", "type": "instance", "target": "b"},
@@ -277,7 +240,7 @@ TEST_CASE("json: instance cycles reach the graph and compile reports them") {
 }
 
 TEST_CASE("json: generators and custom node types receive their params as text") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_json_test");
     auto const file = tmp.write("generated.json", R"({"nodes": [
         {"type": "generator", "name": "big", "generator": "test_triangle",
          "params": {"size": 2.5, "count": 3, "flag": true, "label": "x y", "list": [1, 0.5, "z"]}},
@@ -305,7 +268,7 @@ TEST_CASE("json: generators and custom node types receive their params as text")
 }
 
 TEST_CASE("json: bad input names the file, the JSON path and the problem; the scene is left as it was") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_json_test");
     auto const r = json_registry();
     std::string const tri = R"({"name": "tri", "positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]})";
     struct bad_case {
@@ -388,7 +351,7 @@ TEST_CASE("json: bad input names the file, the JSON path and the problem; the sc
 }
 
 TEST_CASE("json: nodes nested too deep and scenes that load themselves are errors, not crashes") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_json_test");
     auto const r = json_registry();
     std::string deep = R"({"nodes": [)";
     for (int i = 0; i < 1000; ++i) deep += R"({"type": "group", "children": [)";

@@ -14,40 +14,24 @@
 #include <sstream>
 #include <string>
 #include <vector>
-#include <unistd.h>
+
+#include "test_support.hpp"
 
 import canopy.scene;
 import canopy.plugins.obj;
 import canopy.plugins.oiio;
 import canopy.image_io;
 
+#include "scene_support.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
+using test_support::load_failure;
+using test_support::temp_folder;
 using namespace std::string_literals;
 using canopy::vec2;
 using canopy::vec3;
-
-// A folder of its own for each test case, removed afterwards.
-struct temp_folder {
-    fs::path path;
-    temp_folder() : path(fs::temp_directory_path() / ("canopy_obj_test_" + std::to_string(::getpid()))) {
-        fs::remove_all(path);
-        fs::create_directories(path);
-    }
-    ~temp_folder() {
-        std::error_code ignored;
-        fs::remove_all(path, ignored);
-    }
-    temp_folder(temp_folder const&) = delete;
-    temp_folder& operator=(temp_folder const&) = delete;
-
-    fs::path write(std::string const& name, std::string const& text) const {
-        fs::path const p = path / name;
-        std::ofstream(p, std::ios::binary) << text;
-        return p;
-    }
-};
 
 canopy::registry obj_registry() {
     canopy::registry r;
@@ -74,28 +58,6 @@ std::vector<canopy::mesh_data const*> meshes_of(canopy::scene const& s, canopy::
     return out;
 }
 
-struct failure {
-    std::string file, where, problem;
-};
-
-// Loads the file and returns the scene_error it must give; the scene must be left as it was.
-failure load_failure(canopy::registry const& r, fs::path const& file) {
-    canopy::scene s;
-    s.add_group(s.root(), "before");
-    auto const nodes = s.nodes().size();
-    try {
-        r.load(s, file);
-    } catch (canopy::scene_error const& e) {
-        CHECK(s.nodes().size() == nodes);
-        CHECK(s.meshes().empty());
-        CHECK(s.materials().empty());
-        CHECK(s.images().empty());
-        return {e.file(), e.where(), e.problem()};
-    }
-    FAIL("no scene_error for " << file);
-    return {};
-}
-
 void write_png(fs::path const& p, int w, int h, std::vector<std::array<float, 4>> const& texels) {
     canopy::rgba_image img;
     img.width = w;
@@ -107,7 +69,7 @@ void write_png(fs::path const& p, int w, int h, std::vector<std::array<float, 4>
 } // namespace
 
 TEST_CASE("obj: polygons are fanned, in file order, with negative indices relative to the count so far") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_obj_test");
     auto const file = tmp.write("fans.obj", "# five vertices\n"
                                             "v 0 0 0\n"
                                             "v 1 0 0\n"
@@ -142,7 +104,7 @@ TEST_CASE("obj: polygons are fanned, in file order, with negative indices relati
 }
 
 TEST_CASE("obj: a polygon of 50000 corners is fanned into 49998 triangles") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_obj_test");
     constexpr int n = 50000;
     std::string text;
     for (int i = 0; i < n; ++i) text += "v " + std::to_string(i) + " " + std::to_string(i % 7) + " 0\n";
@@ -161,7 +123,7 @@ TEST_CASE("obj: a polygon of 50000 corners is fanned into 49998 triangles") {
 }
 
 TEST_CASE("obj: corners v/vt, v//vn and v/vt/vn give per-corner uvs (v flipped) and normals") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_obj_test");
     auto const file = tmp.write("forms.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                              "vt 0.25 0.125\nvt 0.5\nvt 1 1 0\n"
                                              "vn 0 0 1\nvn 0 0.6 0.8\n"
@@ -195,7 +157,7 @@ TEST_CASE("obj: corners v/vt, v//vn and v/vt/vn give per-corner uvs (v flipped) 
 }
 
 TEST_CASE("obj: the benchmark OBJ subset reads identically: triangle i is the i-th f line") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_obj_test");
     std::mt19937 rng(7);
     std::uniform_real_distribution<float> coordinate(-10.0f, 10.0f);
     std::vector<vec3<float>> vertices;
@@ -234,7 +196,7 @@ TEST_CASE("obj: the benchmark OBJ subset reads identically: triangle i is the i-
 }
 
 TEST_CASE("obj: one mesh per material in order of first use; MTL colours; undefined names use the default") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_obj_test");
     tmp.write("colours.mtl", "# two materials\n"
                              "newmtl red\n"
                              "Kd 1 0 0\n"
@@ -281,7 +243,7 @@ TEST_CASE("obj: one mesh per material in order of first use; MTL colours; undefi
 }
 
 TEST_CASE("obj: map_Kd loads through the registry; map_d or texture alpha makes an alpha mask with cutoff 0.5") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_obj_test");
     fs::create_directories(tmp.path / "maps");
     // 2x1 colour image: red opaque, green opaque; 1x1 grey alpha map 0.4 (102/255).
     write_png(tmp.path / "maps" / "colour.png", 2, 1, {{1, 0, 0, 1}, {0, 1, 0, 1}});
@@ -346,7 +308,7 @@ TEST_CASE("obj: map_Kd loads through the registry; map_d or texture alpha makes 
 }
 
 TEST_CASE("obj: bad input names the file, the line and the problem; the scene is left as it was") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_obj_test");
     auto const r = obj_registry();
     std::string const tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
     struct bad_case {
@@ -394,7 +356,7 @@ TEST_CASE("obj: bad input names the file, the line and the problem; the scene is
 }
 
 TEST_CASE("obj: bad material libraries and missing textures name the .mtl line") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_obj_test");
     auto const r = obj_registry();
     write_png(tmp.path / "ok.png", 1, 1, {{1, 1, 1, 1}});
     struct bad_case {

@@ -23,38 +23,23 @@
 #include <sstream>
 #include <string>
 #include <vector>
-#include <unistd.h>
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 
+#include "test_support.hpp"
+
 import canopy.scene;
 import canopy.plugins.openmesh;
+
+#include "scene_support.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using test_support::temp_folder;
 using canopy::vec2;
 using canopy::vec3;
-
-struct temp_folder {
-    fs::path path;
-    temp_folder() : path(fs::temp_directory_path() / ("canopy_openmesh_test_" + std::to_string(::getpid()))) {
-        fs::remove_all(path);
-        fs::create_directories(path);
-    }
-    ~temp_folder() {
-        std::error_code ignored;
-        fs::remove_all(path, ignored);
-    }
-    temp_folder(temp_folder const&) = delete;
-    temp_folder& operator=(temp_folder const&) = delete;
-};
-
-void write_file(fs::path const& p, std::string const& content) {
-    std::ofstream out(p, std::ios::binary);
-    out << content;
-}
 
 std::string read_file(fs::path const& p) {
     std::ifstream in(p, std::ios::binary);
@@ -83,19 +68,10 @@ canopy::mesh_data load_mesh(fs::path const& file, canopy::scene& s) {
 
 // The loader's error for `file`: a scene_error whose message names the file and says `problem`.
 void require_error(fs::path const& file, std::string const& problem) {
-    canopy::scene s;
-    auto const nodes = s.nodes().size();
-    try {
-        openmesh_registry().load(s, file, s.root(), "openmesh");
-        FAIL("no error for " << file);
-    } catch (canopy::scene_error const& e) {
-        std::string const m = e.what();
-        INFO(m);
-        CHECK(m.find(file.filename().string()) != std::string::npos);
-        CHECK(m.find(problem) != std::string::npos);
-    }
-    CHECK(s.nodes().size() == nodes);
-    CHECK(s.meshes().empty());
+    std::string const m = test_support::load_failure(openmesh_registry(), file, "openmesh").message;
+    INFO(m);
+    CHECK(m.find(file.filename().string()) != std::string::npos);
+    CHECK(m.find(problem) != std::string::npos);
 }
 
 // --- Independent readings of the real meshes -------------------------------------------------
@@ -334,7 +310,7 @@ TEST_CASE("the Stanford bunny of glmark2-data loads with every face of its file,
 }
 
 TEST_CASE("closed OFF meshes of libcgal-demo load exactly and no ray from inside escapes") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_openmesh_test");
     auto const files = cgal_meshes(tmp.path, {"elephant.off", "eight.off", "sphere.off"});
     for (auto const& f : files) check_closed_mesh_traces(f, parse_triangle_off(f), 12, 60);
 }
@@ -427,13 +403,13 @@ std::string off() {
 } // namespace pyramid
 
 TEST_CASE("PLY ASCII and binary (both byte orders) load positions, per-vertex normals and uvs, quads fanned") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_openmesh_test");
     std::vector<std::pair<std::string, std::string>> const files{{"ascii.ply", pyramid::ply_ascii()},
                                                                  {"little.ply", pyramid::ply_binary(false)},
                                                                  {"big.ply", pyramid::ply_binary(true)}};
     for (auto const& [name, content] : files) {
         INFO(name);
-        write_file(tmp.path / name, content);
+        tmp.write(name, content);
         canopy::scene s;
         pyramid::check(load_mesh(tmp.path / name, s), true, true);
         auto const r = canopy::read_openmesh(tmp.path / name);
@@ -445,14 +421,14 @@ TEST_CASE("PLY ASCII and binary (both byte orders) load positions, per-vertex no
 }
 
 TEST_CASE("OFF loads positions and fans polygons; faces OpenMesh cannot connect are kept on their vertices") {
-    temp_folder tmp;
-    write_file(tmp.path / "pyramid.off", pyramid::off());
+    temp_folder const tmp("canopy_openmesh_test");
+    tmp.write("pyramid.off", pyramid::off());
     canopy::scene s;
     pyramid::check(load_mesh(tmp.path / "pyramid.off", s), false, false);
 
     // Three triangles on one edge (0, 1) and a face repeating a vertex: OpenMesh's importer
     // re-adds the non-manifold one on copied vertices and drops the degenerate one.
-    write_file(tmp.path / "fin.off", "OFF\n5 4 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n0 0 1\n"
+    tmp.write("fin.off", "OFF\n5 4 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n0 0 1\n"
                                      "3 0 1 2\n3 1 0 3\n3 0 1 4\n3 2 2 4\n");
     auto const r = canopy::read_openmesh(tmp.path / "fin.off");
     CHECK(r.faces == 4);
@@ -464,7 +440,7 @@ TEST_CASE("OFF loads positions and fans polygons; faces OpenMesh cannot connect 
 }
 
 TEST_CASE("STL ASCII and binary load every facet with its corners") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_openmesh_test");
     std::array<std::array<vec3<float>, 3>, 3> const facets{{{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}},
                                                            {{{1, 0, 0}, {1, 1, 0.5f}, {0, 1, 0}}},
                                                            {{{-2, 3, 4}, {-2.5f, 3, 4}, {-2, 3.25f, 4.75f}}}}};
@@ -485,8 +461,8 @@ TEST_CASE("STL ASCII and binary load every facet with its corners") {
             for (float v : {p.x, p.y, p.z}) pyramid::put(binary, v, false);
         pyramid::put(binary, std::uint16_t(0), false);
     }
-    write_file(tmp.path / "ascii.stl", ascii.str());
-    write_file(tmp.path / "binary.stl", binary);
+    tmp.write("ascii.stl", ascii.str());
+    tmp.write("binary.stl", binary);
     for (char const* name : {"ascii.stl", "binary.stl"}) {
         INFO(name);
         canopy::scene s;
@@ -543,7 +519,7 @@ TEST_CASE("STL ASCII and binary load every facet with its corners") {
 }
 
 TEST_CASE("OM files written by OpenMesh load with their normals and texture coordinates") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_openmesh_test");
     using om_mesh = OpenMesh::PolyMesh_ArrayKernelT<>;
     om_mesh m;
     m.request_vertex_normals();
@@ -594,16 +570,16 @@ TEST_CASE("OM files written by OpenMesh load with their normals and texture coor
 
     // Cut short after its header: OpenMesh's reader fails, or reads fewer faces than declared.
     std::string const om = read_file(tmp.path / "pyramid.om");
-    write_file(tmp.path / "cut.om", om.substr(0, 40));
+    tmp.write("cut.om", om.substr(0, 40));
     require_error(tmp.path / "cut.om", "OpenMesh cannot read it");
-    write_file(tmp.path / "cut.om", om.substr(0, om.size() - 20));
+    tmp.write("cut.om", om.substr(0, om.size() - 20));
     require_error(tmp.path / "cut.om", "5 of 5 faces were dropped");
 }
 
 TEST_CASE("OBJ through the openmesh plugin keeps per-corner texture coordinates and normals") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_openmesh_test");
     // Vertex 0 carries different vt and vn in the two faces.
-    write_file(tmp.path / "corners.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n"
+    tmp.write("corners.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n"
                                          "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.25 0.75\n"
                                          "vn 0 0 1\nvn 0 1 0\n"
                                          "f 1/1/1 2/2/1 3/3/1 4/4/1\nf 1/5/2 5/2/2 2/3/2\n");
@@ -625,55 +601,55 @@ TEST_CASE("OBJ through the openmesh plugin keeps per-corner texture coordinates 
 }
 
 TEST_CASE("missing, empty and truncated files are errors naming the file") {
-    temp_folder tmp;
+    temp_folder const tmp("canopy_openmesh_test");
     require_error(tmp.path / "missing.ply", "not found");
     CHECK_THROWS_AS(canopy::read_openmesh(tmp.path / "missing.off"), canopy::scene_error);
     for (char const* name : {"empty.ply", "empty.off", "empty.stl", "empty.om", "empty.obj"}) {
-        write_file(tmp.path / name, "");
+        tmp.write(name, "");
         require_error(tmp.path / name, "empty");
     }
-    write_file(tmp.path / "blank.off", "  \n\n");
+    tmp.write("blank.off", "  \n\n");
     require_error(tmp.path / "blank.off", "empty");
 
     std::string const ply = pyramid::ply_binary(false);
-    write_file(tmp.path / "cut.ply", ply.substr(0, ply.size() - 7));
+    tmp.write("cut.ply", ply.substr(0, ply.size() - 7));
     require_error(tmp.path / "cut.ply", "file ends in face 4 of 5");
-    write_file(tmp.path / "cut_vertices.ply", ply.substr(0, ply.find("end_header") + 11 + 40));
+    tmp.write("cut_vertices.ply", ply.substr(0, ply.find("end_header") + 11 + 40));
     require_error(tmp.path / "cut_vertices.ply", "file ends in vertex 1 of 5");
 
     std::string const stl = read_file("/usr/share/assimp/models/STL/Spider_binary.stl");
-    write_file(tmp.path / "cut.stl", stl.substr(0, stl.size() - 30));
+    tmp.write("cut.stl", stl.substr(0, stl.size() - 30));
     require_error(tmp.path / "cut.stl", "truncated");
-    write_file(tmp.path / "short.stl", stl.substr(0, 40));
+    tmp.write("short.stl", stl.substr(0, 40));
     require_error(tmp.path / "short.stl", "too short");
 
     std::string const off = pyramid::off();
-    write_file(tmp.path / "cut.off", off.substr(0, off.rfind("3 3 0 4")));
+    tmp.write("cut.off", off.substr(0, off.rfind("3 3 0 4")));
     require_error(tmp.path / "cut.off", "file ends after 4 of 5 faces");
-    write_file(tmp.path / "cut.om", "OM");
+    tmp.write("cut.om", "OM");
     require_error(tmp.path / "cut.om", "header");
 }
 
 TEST_CASE("NaN and infinite coordinates are errors naming the file and the place") {
-    temp_folder tmp;
-    write_file(tmp.path / "nan.off", "OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n");
+    temp_folder const tmp("canopy_openmesh_test");
+    tmp.write("nan.off", "OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n");
     require_error(tmp.path / "nan.off", "nan.off:4: vertex 1: coordinate 'nan' is not a finite number");
-    write_file(tmp.path / "inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n");
+    tmp.write("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n");
     require_error(tmp.path / "inf.obj", "inf.obj:3: vertex coordinate 'inf' is not a finite number");
-    write_file(tmp.path / "huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1 1e999\nf 1 2 3\n");
+    tmp.write("huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1 1e999\nf 1 2 3\n");
     require_error(tmp.path / "huge.obj", "huge.obj:3: vertex coordinate '1e999' is not a finite number");
     std::string ascii = pyramid::ply_ascii();
     ascii.replace(ascii.find("end_header\n") + 11, 1, "-inf");
-    write_file(tmp.path / "inf.ply", ascii);
+    tmp.write("inf.ply", ascii);
     require_error(tmp.path / "inf.ply", "vertex 0: coordinate x = '-inf' is not finite");
 
     std::string binary = pyramid::ply_binary(false);
     float const nan = std::numeric_limits<float>::quiet_NaN();
     std::memcpy(binary.data() + binary.find("end_header\n") + 11 + 32 + 8, &nan, 4); // vertex 1, z
-    write_file(tmp.path / "nan.ply", binary);
+    tmp.write("nan.ply", binary);
     require_error(tmp.path / "nan.ply", "vertex 1: coordinate z");
 
-    write_file(tmp.path / "nan.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 NaN\n"
+    tmp.write("nan.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 NaN\n"
                                      "vertex 0 1 0\nendloop\nendfacet\nendsolid x\n");
     require_error(tmp.path / "nan.stl", "nan.stl:5: coordinate 'NaN' is not a finite number");
     std::string stl(80, ' ');
@@ -681,35 +657,35 @@ TEST_CASE("NaN and infinite coordinates are errors naming the file and the place
     for (float v : {0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, std::numeric_limits<float>::infinity(), 0.0f})
         pyramid::put(stl, v, false);
     pyramid::put(stl, std::uint16_t(0), false);
-    write_file(tmp.path / "inf.stl", stl);
+    tmp.write("inf.stl", stl);
     require_error(tmp.path / "inf.stl", "triangle 0: corner 2 has a coordinate that is not finite");
 }
 
 TEST_CASE("vertex indices out of range and faces of fewer than three corners are errors") {
-    temp_folder tmp;
-    write_file(tmp.path / "range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
+    temp_folder const tmp("canopy_openmesh_test");
+    tmp.write("range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
     require_error(tmp.path / "range.off", "range.off:6: face 0: vertex index 3 is out of range (3 vertices)");
-    write_file(tmp.path / "negative.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n");
+    tmp.write("negative.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n");
     require_error(tmp.path / "negative.off", "vertex index -1 is out of range");
-    write_file(tmp.path / "two.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n");
+    tmp.write("two.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n");
     require_error(tmp.path / "two.off", "face 0 has 2 corners");
-    write_file(tmp.path / "counts.off", "OFF 3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+    tmp.write("counts.off", "OFF 3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
     require_error(tmp.path / "counts.off", "counts from the next line");
 
     std::string ascii = pyramid::ply_ascii();
     ascii.replace(ascii.rfind("3 3 0 4"), 7, "3 3 0 5");
-    write_file(tmp.path / "range.ply", ascii);
+    tmp.write("range.ply", ascii);
     require_error(tmp.path / "range.ply", "face 4: vertex index '5' is out of range (5 vertices)");
     std::string binary = pyramid::ply_binary(true);
     binary.replace(binary.size() - 4, 4, std::string("\0\0\0\7", 4)); // the last index, big-endian 7
-    write_file(tmp.path / "range_big.ply", binary);
+    tmp.write("range_big.ply", binary);
     require_error(tmp.path / "range_big.ply", "face 4: vertex index 7 is out of range (5 vertices)");
 
-    write_file(tmp.path / "range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n");
+    tmp.write("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n");
     require_error(tmp.path / "range.obj", "range.obj:5: vertex index 4 is out of range");
-    write_file(tmp.path / "uv_range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n");
+    tmp.write("uv_range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n");
     require_error(tmp.path / "uv_range.obj", "texture coordinate index 2 is out of range");
-    write_file(tmp.path / "line.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
+    tmp.write("line.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
     require_error(tmp.path / "line.obj", "line.obj:3: face has 2 corners");
 }
 
@@ -744,8 +720,8 @@ TEST_CASE("the openmesh plugin registers its extensions and keeps OpenMesh's mes
     auto const& r = openmesh_registry();
     for (char const* ext : {".ply", ".off", ".stl", ".om", ".obj", ".PLY"}) CHECK(r.has_loader(ext));
     // A face OpenMesh complains about ("complex edge") while reading: nothing may reach std::cerr.
-    temp_folder tmp;
-    write_file(tmp.path / "fin.off", "OFF\n4 3 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n3 0 1 2\n3 0 1 3\n3 1 0 3\n");
+    temp_folder const tmp("canopy_openmesh_test");
+    tmp.write("fin.off", "OFF\n4 3 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n3 0 1 2\n3 0 1 3\n3 1 0 3\n");
     std::ostringstream captured;
     auto* const old = std::cerr.rdbuf(captured.rdbuf());
     auto const result = canopy::read_openmesh(tmp.path / "fin.off");

@@ -22,33 +22,23 @@
 #include <string>
 #include <vector>
 
+#include "test_support.hpp"
+
 import canopy.scene;
 import canopy.plugins;
+
+#include "scene_support.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using test_support::error_of;
+using test_support::temp_folder;
 using canopy::vec3;
 using dvec3 = vec3<double>;
 
 fs::path const spiral_plugin = CANOPY_SPIRAL_PLUGIN;
 fs::path const not_a_plugin = CANOPY_NOT_A_PLUGIN;
-
-fs::path temp_folder(std::string const& name) {
-    fs::path const p = fs::temp_directory_path() / ("canopy_scene_plugin_test_" + name);
-    fs::remove_all(p);
-    fs::create_directories(p);
-    return p;
-}
-
-canopy::scene_error error_of(auto&& f) {
-    try {
-        f();
-    } catch (canopy::scene_error const& e) {
-        return e;
-    }
-    return canopy::scene_error("", "", "(no scene_error)");
-}
 
 canopy::registry with_spiral() {
     canopy::registry r;
@@ -229,7 +219,8 @@ TEST_CASE("CANOPY_PLUGIN_PATH is loaded by builtin_registry()") {
 }
 
 TEST_CASE("files that are not plugins are scene errors naming the file; the registry is unchanged") {
-    auto const folder = temp_folder("failures");
+    temp_folder const tmp("canopy_scene_plugin_test");
+    fs::path const& folder = tmp.path;
     fs::path const text = folder / "notes.so";
     std::ofstream(text) << "not a shared library\n";
     struct failure {

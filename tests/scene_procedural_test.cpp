@@ -9,8 +9,10 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <map>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -18,8 +20,11 @@ import canopy.scene;
 import canopy.plugins.procedural;
 import canopy.billboard_forest;
 
+#include "scene_support.hpp"
+
 namespace {
 
+using test_support::message_of;
 using canopy::vec3;
 
 canopy::registry procedural_registry() {
@@ -33,15 +38,6 @@ canopy::scene generated(std::string const& name, canopy::parameters const& param
     canopy::scene s;
     procedural_registry().generate(s, name, params);
     return s;
-}
-
-std::string message_of(auto&& f) {
-    try {
-        f();
-    } catch (canopy::scene_error const& e) {
-        return e.what();
-    }
-    return "(no scene_error)";
 }
 
 std::vector<std::uint32_t> bits_of(canopy::mesh_data const& m) {

@@ -14,12 +14,17 @@
 #include <string>
 #include <vector>
 
+#include "test_support.hpp"
+
 import canopy.scene;
 import canopy.procedural;
+
+#include "scene_support.hpp"
 
 namespace {
 
 using canopy::node_id;
+using test_support::message_of;
 using canopy::vec3;
 using xf = canopy::affine_transform<float>;
 
@@ -45,15 +50,6 @@ xf scale_rotate_z(float s, float degrees, vec3<float> t) {
     double const a = double(degrees) * 3.14159265358979323846 / 180.0;
     float const c = float(std::cos(a)) * s, n = float(std::sin(a)) * s;
     return xf::from_rows({c, -n, 0, t.x, n, c, 0, t.y, 0, 0, s, t.z});
-}
-
-std::string message_of(auto&& f) {
-    try {
-        f();
-    } catch (canopy::scene_error const& e) {
-        return e.what();
-    }
-    return "(no scene_error)";
 }
 
 // ---- the reference: every placed triangle in world space, in double --------------------------
@@ -482,8 +478,8 @@ TEST_CASE("the registry loads by extension, names what it knows, and rolls back 
         s.add_mesh_node(g, s.add_mesh(m));
         return g;
     });
-    auto const dir = std::filesystem::temp_directory_path() / "canopy_scene_test";
-    std::filesystem::create_directories(dir);
+    test_support::temp_folder const tmp("canopy_scene_test");
+    auto const& dir = tmp.path;
     std::ofstream(dir / "bad.TRI") << "1 2 3\n";
     canopy::scene s;
     std::string const msg = message_of([&] { r.load(s, dir / "bad.TRI"); });
@@ -501,7 +497,6 @@ TEST_CASE("the registry loads by extension, names what it knows, and rolls back 
     CHECK(message_of([&] { r.generate(s, "forest", {}); }).find("generator 'forest': is not registered") !=
           std::string::npos);
     CHECK(message_of([&] { r.load_plugin(dir / "bad.TRI"); }).find("cannot load plugin") != std::string::npos);
-    std::filesystem::remove_all(dir);
 }
 
 TEST_CASE("custom nodes are expanded by their registered type, and refused without one") {

@@ -50,30 +50,6 @@ std::vector<triangle> object_mesh(random_source& rng) {
     return mesh;
 }
 
-// Rotation by a random unit quaternion, in double.
-std::array<dvec3, 3> random_rotation_rows(random_source& rng) {
-    double w = 0, x = 0, y = 0, z = 0, n = 0;
-    do {
-        w = rng.uniform_double(-1, 1), x = rng.uniform_double(-1, 1), y = rng.uniform_double(-1, 1),
-        z = rng.uniform_double(-1, 1);
-        n = std::sqrt(w * w + x * x + y * y + z * z);
-    } while (n < 0.1 || n > 1.0);
-    w /= n, x /= n, y /= n, z /= n;
-    return {dvec3{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
-            dvec3{2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
-            dvec3{2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
-}
-
-std::array<dvec3, 3> const no_rotation{dvec3{1, 0, 0}, dvec3{0, 1, 0}, dvec3{0, 0, 1}};
-
-// rotation · diag(scale), then translation, rounded to float.
-transform make_transform(std::array<dvec3, 3> const& rows, dvec3 const& scale, vec3<float> const& translation) {
-    auto const f = [](double v) { return static_cast<float>(v); };
-    return transform::from_rows({f(rows[0].x * scale.x), f(rows[0].y * scale.y), f(rows[0].z * scale.z), translation.x,
-                                 f(rows[1].x * scale.x), f(rows[1].y * scale.y), f(rows[1].z * scale.z), translation.y,
-                                 f(rows[2].x * scale.x), f(rows[2].y * scale.y), f(rows[2].z * scale.z), translation.z});
-}
-
 // The float transform applied in double.
 dvec3 apply(transform const& m, dvec3 const& p) {
     return dvec3(m.linear.col0) * p.x + dvec3(m.linear.col1) * p.y + dvec3(m.linear.col2) * p.z + dvec3(m.translation);

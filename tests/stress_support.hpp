@@ -1,11 +1,18 @@
 // Helpers shared by the stress battery's test files (stress_test.cpp, stress_instancing_test.cpp).
 //
 // Include it after the standard headers and the `import canopy.query;` of the test file: it uses
-// <bit>, <cmath>, <cstdlib>, <limits>, <random>, <sstream>, <string>, <string_view> and Catch2,
-// which the test file includes before its imports (standard headers may not follow an import).
+// <array>, <bit>, <cmath>, <cstdint>, <cstdlib>, <limits>, <random>, <sstream>, <string>,
+// <string_view>, <vector> and Catch2, which the test file includes before its imports (standard
+// headers may not follow an import).
 #pragma once
 
+#include "random_support.hpp"
+
 namespace stress_support {
+
+using test_support::random_rays;
+using test_support::random_source;
+using test_support::triangle_soup;
 
 using canopy::ray;
 using canopy::triangle;
@@ -33,35 +40,29 @@ inline int sized(int small, int full) { return full_battery() ? full : small; }
 
 inline std::uint32_t bits(float x) { return std::bit_cast<std::uint32_t>(x); }
 
-struct random_source {
-    std::mt19937 engine;
-    explicit random_source(std::uint32_t seed) : engine(seed) {}
-    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
-    double uniform_double(double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(engine); }
-    int integer(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(engine); }
-    vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
-    // A multiple of 2^-k in [-extent, extent].
-    float dyadic(float extent, int k) {
-        int const n = static_cast<int>(std::ldexp(extent, k));
-        return std::ldexp(static_cast<float>(integer(-n, n)), -k);
-    }
-    vec3<float> dyadic_point(float extent, int k) { return {dyadic(extent, k), dyadic(extent, k), dyadic(extent, k)}; }
-    // A point of the unit ball.
-    vec3<float> in_ball() {
-        for (;;) {
-            vec3<float> const p = point(-1.0f, 1.0f);
-            if (canopy::dot(p, p) <= 1.0f) return p;
-        }
-    }
-    // A direction, uniform over the sphere, of length in [0.1, 1] (not normalised).
-    vec3<float> direction() {
-        for (;;) {
-            vec3<float> const p = point(-1.0f, 1.0f);
-            float const l2 = canopy::dot(p, p);
-            if (l2 >= 0.01f && l2 <= 1.0f) return p;
-        }
-    }
-};
+// Rotation by a random unit quaternion, in double.
+inline std::array<dvec3, 3> random_rotation_rows(random_source& rng) {
+    double w = 0, x = 0, y = 0, z = 0, n = 0;
+    do {
+        w = rng.uniform_double(-1, 1), x = rng.uniform_double(-1, 1), y = rng.uniform_double(-1, 1),
+        z = rng.uniform_double(-1, 1);
+        n = std::sqrt(w * w + x * x + y * y + z * z);
+    } while (n < 0.1 || n > 1.0);
+    w /= n, x /= n, y /= n, z /= n;
+    return {dvec3{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+            dvec3{2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+            dvec3{2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+}
+
+inline std::array<dvec3, 3> const no_rotation{dvec3{1, 0, 0}, dvec3{0, 1, 0}, dvec3{0, 0, 1}};
+
+// rotation · diag(scale), then translation, rounded to float.
+inline transform make_transform(std::array<dvec3, 3> const& rows, dvec3 const& scale, vec3<float> const& translation) {
+    auto const f = [](double v) { return static_cast<float>(v); };
+    return transform::from_rows({f(rows[0].x * scale.x), f(rows[0].y * scale.y), f(rows[0].z * scale.z), translation.x,
+                                 f(rows[1].x * scale.x), f(rows[1].y * scale.y), f(rows[1].z * scale.z), translation.y,
+                                 f(rows[2].x * scale.x), f(rows[2].y * scale.y), f(rows[2].z * scale.z), translation.z});
+}
 
 inline std::string describe(vec3<float> const& v) {
     std::ostringstream s;

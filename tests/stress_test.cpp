@@ -196,52 +196,6 @@ std::vector<triangle> translated(std::vector<triangle> tris, vec3<float> const& 
     return tris;
 }
 
-std::vector<triangle> random_soup(random_source& rng, int count, float extent, float size) {
-    std::vector<triangle> soup;
-    for (int i = 0; i < count; ++i) {
-        vec3<float> const c = rng.point(-extent, extent);
-        soup.push_back({c + rng.point(-size, size), c + rng.point(-size, size), c + rng.point(-size, size),
-                        static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(i % 3)});
-    }
-    return soup;
-}
-
-// Rays from around the box towards random points inside it.
-std::vector<ray> rays_into(random_source& rng, canopy::aabb const& bounds, int count) {
-    vec3<float> const c = (bounds.min + bounds.max) * 0.5f;
-    float const r = canopy::length(bounds.max - bounds.min);
-    std::vector<ray> rays;
-    for (int i = 0; i < count; ++i) {
-        vec3<float> const origin = c + rng.point(-r, r);
-        vec3<float> const target{rng.uniform(bounds.min.x, bounds.max.x), rng.uniform(bounds.min.y, bounds.max.y),
-                                 rng.uniform(bounds.min.z, bounds.max.z)};
-        rays.push_back({origin, 0.0f, target - origin, inf});
-    }
-    return rays;
-}
-
-// Rotation by a random unit quaternion, in double.
-std::array<dvec3, 3> random_rotation_rows(random_source& rng) {
-    double w = 0, x = 0, y = 0, z = 0, n = 0;
-    do {
-        w = rng.uniform_double(-1, 1), x = rng.uniform_double(-1, 1), y = rng.uniform_double(-1, 1),
-        z = rng.uniform_double(-1, 1);
-        n = std::sqrt(w * w + x * x + y * y + z * z);
-    } while (n < 0.1 || n > 1.0);
-    w /= n, x /= n, y /= n, z /= n;
-    return {dvec3{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
-            dvec3{2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
-            dvec3{2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
-}
-
-// rotation · diag(scale), then translation, rounded to float.
-transform make_transform(std::array<dvec3, 3> const& rows, dvec3 const& scale, vec3<float> const& translation) {
-    auto const f = [](double v) { return static_cast<float>(v); };
-    return transform::from_rows({f(rows[0].x * scale.x), f(rows[0].y * scale.y), f(rows[0].z * scale.z), translation.x,
-                                 f(rows[1].x * scale.x), f(rows[1].y * scale.y), f(rows[1].z * scale.z), translation.y,
-                                 f(rows[2].x * scale.x), f(rows[2].y * scale.y), f(rows[2].z * scale.z), translation.z});
-}
-
 // A scene of three instances of one mesh: identity (id 0), translated (id 1), rotated and scaled (id 2).
 struct instanced_scene {
     std::vector<triangle> mesh;
@@ -254,7 +208,7 @@ struct instanced_scene {
         renumber(mesh);
         object = canopy::build_binned_sah(mesh);
         instances.emplace_back(object, transform::identity(), 0);
-        instances.emplace_back(object, make_transform({dvec3{1, 0, 0}, dvec3{0, 1, 0}, dvec3{0, 0, 1}}, {1, 1, 1},
+        instances.emplace_back(object, make_transform(no_rotation, {1, 1, 1},
                                                       {6.5f, -1.25f, 2.0f}),
                                1);
         instances.emplace_back(object, make_transform(random_rotation_rows(rng), {0.75, 1.5, 1.0}, {-5.0f, 3.0f, 1.0f}), 2);
@@ -393,7 +347,7 @@ TEST_CASE("rays from inside aimed exactly at every vertex and edge midpoint hit 
         // Origins: the centre (0, 0, 0) and, for the dyadic mesh, small dyadic points around it.
         std::vector<vec3<float>> origins{{0.0f, 0.0f, 0.0f}};
         if (m.dyadic)
-            for (int i = 0; i < 3; ++i) origins.push_back(rng.dyadic_point(0.25f, 6));
+            for (int i = 0; i < 3; ++i) origins.push_back(rng.dyadic_point(-0.25f, 0.25f, 6));
         for (vec3<float> const& o : origins) {
             for (vec3<float> const& v : f.vertices) {
                 ray const r{o, 0.0f, v - o, inf};
@@ -472,8 +426,8 @@ void trace_through_fans(bool boundary, failure_log& failures, std::size_t& rays,
         }
         for (target const& tg : targets) {
             for (int i = 0; i < 32; ++i) {
-                vec3<float> offset = rng.dyadic_point(12.0f, 3);
-                offset.z = (i % 2 == 0 ? 1.0f : -1.0f) * (1.0f + std::fabs(rng.dyadic(11.0f, 3)));
+                vec3<float> offset = rng.dyadic_point(-12.0f, 12.0f, 3);
+                offset.z = (i % 2 == 0 ? 1.0f : -1.0f) * (1.0f + std::fabs(rng.dyadic(-11.0f, 11.0f, 3)));
                 vec3<float> const o = tg.point + offset;
                 dvec3 const step = dvec3(offset) * 1e-3;
                 if (side(dvec3(tg.point) + step) * side(dvec3(tg.point) - step) != -1) continue;
@@ -717,7 +671,7 @@ namespace {
 struct broken_ray_scene {
     random_source rng{501};
     std::vector<triangle> mesh =
-        concatenate(canopy::make_icosphere(3, {0.0f, 0.0f, 0.0f}, 1.5f), random_soup(rng, 200, 3.0f, 0.8f));
+        concatenate(canopy::make_icosphere(3, {0.0f, 0.0f, 0.0f}, 1.5f), triangle_soup(rng, 200, 3.0f, 0.8f));
     instanced_scene scene{mesh, rng};
     // Scaled by 1/8 and rotated by 45 degrees about z: the inverse multiplies by about 5.66, so
     // finite world origins near 1e38 become Inf - Inf = NaN in object space.
@@ -726,7 +680,7 @@ struct broken_ray_scene {
         transform::from_rows({0.08838835f, -0.08838835f, 0, 1.0f, 0.08838835f, 0.08838835f, 0, -2.0f, 0, 0, 0.125f, 0.5f}),
         7)};
     instance_bvh shrunk_top = canopy::build_binned_sah(shrunk);
-    std::vector<ray> valid = rays_into(rng, scene.object.bounds(), sized(48, 400));
+    std::vector<ray> valid = random_rays(rng, scene.object.bounds(), sized(48, 400));
 };
 
 } // namespace
@@ -830,12 +784,12 @@ TEST_CASE("NaN and Inf rays, tmin > tmax and zero directions miss in packets wit
 
 TEST_CASE("scaling the direction by 2^k keeps the triangle and u, v bit for bit and scales t by exactly 2^-k") {
     random_source rng(601);
-    auto const mesh = concatenate(canopy::make_icosphere(3, {0.0f, 0.0f, 0.0f}, 2.0f), random_soup(rng, 300, 4.0f, 1.0f));
+    auto const mesh = concatenate(canopy::make_icosphere(3, {0.0f, 0.0f, 0.0f}, 2.0f), triangle_soup(rng, 300, 4.0f, 1.0f));
     instanced_scene const scene(mesh, rng);
     failure_log failures;
     std::size_t hits = 0, rays = 0;
     auto const check = [&](auto const& structure, char const* name) {
-        for (ray const& r : rays_into(rng, structure.bounds(), sized(300, 5000))) {
+        for (ray const& r : random_rays(rng, structure.bounds(), sized(300, 5000))) {
             record const reference = closest(r, structure);
             hits += reference.hit;
             for (int k = -20; k <= 20; ++k) {
@@ -870,8 +824,8 @@ TEST_CASE("zero-area triangles are never hit, directly or through a BVH; slivers
                                      {{1, 2, 3}, {4, 5, 6}, {1, 2, 3}},
                                      {{1, 2, 3}, {1, 2, 3}, {1, 2, 3}}};
     for (int i = 0; i < 200; ++i) {
-        vec3<float> const p = rng.dyadic_point(8.0f, 4);
-        vec3<float> const d = rng.dyadic_point(2.0f, 3);
+        vec3<float> const p = rng.dyadic_point(-8.0f, 8.0f, 4);
+        vec3<float> const d = rng.dyadic_point(-2.0f, 2.0f, 3);
         float const k1 = static_cast<float>(rng.integer(-3, 3)), k2 = static_cast<float>(rng.integer(-3, 3));
         switch (i % 4) {
         case 0: degenerate.push_back({p, p + d * k1, p + d * k2}); break;
@@ -892,7 +846,7 @@ TEST_CASE("zero-area triangles are never hit, directly or through a BVH; slivers
                                          (t.v0 + t.v2) * 0.5f, t.v0 * 0.75f + t.v2 * 0.25f};
         for (vec3<float> const& target : targets) {
             for (int i = 0; i < 8; ++i) {
-                vec3<float> const o = target + rng.dyadic_point(8.0f, 2);
+                vec3<float> const o = target + rng.dyadic_point(-8.0f, 8.0f, 2);
                 for (ray const& r : {ray{o, 0.0f, target - o, inf}, ray{o, -inf, target - o, inf}}) {
                     ++rays;
                     std::string const w = describe(r) + " at prim " + std::to_string(t.prim_id);
@@ -1080,10 +1034,10 @@ TEST_CASE("tmin and tmax at, just below and just above an exact hit distance: hi
     }
 
     // Random geometry: the bounds are respected exactly around whatever t the test returns.
-    auto const soup = random_soup(rng, 200, 4.0f, 1.0f);
+    auto const soup = triangle_soup(rng, 200, 4.0f, 1.0f);
     mesh_bvh const b = canopy::build_binned_sah(soup);
     std::size_t random_hits = 0;
-    for (ray const& base : rays_into(rng, b.bounds(), sized(400, 5000))) {
+    for (ray const& base : random_rays(rng, b.bounds(), sized(400, 5000))) {
         record const h = closest(base, b);
         if (!h.hit) continue;
         ++random_hits;
@@ -1163,8 +1117,8 @@ TEST_CASE("multi_hit<N> equals the first N brute-force hits on a soup, stacked c
         }
     };
 
-    auto const soup = random_soup(rng, 400, 2.0f, 1.5f);
-    run(soup, rays_into(rng, canopy::build_binned_sah(soup).bounds(), sized(300, 3000)), "soup");
+    auto const soup = triangle_soup(rng, 400, 2.0f, 1.5f);
+    run(soup, random_rays(rng, canopy::build_binned_sah(soup).bounds(), sized(300, 3000)), "soup");
 
     // Eight copies of one triangle (prim ids 0..7): every ray through it hits all eight at equal t,
     // also exactly through its vertices and edges.
@@ -1177,7 +1131,7 @@ TEST_CASE("multi_hit<N> equals the first N brute-force hits on a soup, stacked c
                                                  canopy::surface_point(base, 0.25f, 0.5f),
                                                  canopy::surface_point(base, rng.uniform(0.0f, 0.5f), rng.uniform(0.0f, 0.5f))};
         vec3<float> const target = targets[static_cast<std::size_t>(i % 4)];
-        vec3<float> const o = target + rng.dyadic_point(4.0f, 3);
+        vec3<float> const o = target + rng.dyadic_point(-4.0f, 4.0f, 3);
         through.push_back({o, 0.0f, target - o, inf});
     }
     run(stacked, through, "stacked copies");
@@ -1185,7 +1139,7 @@ TEST_CASE("multi_hit<N> equals the first N brute-force hits on a soup, stacked c
     // A mesh: two concentric icospheres, rays from outside, and rays through their vertices (where
     // several triangles are hit at once).
     auto const spheres = concatenate(canopy::make_icosphere(2, {0, 0, 0}, 1.0f), canopy::make_icosphere(2, {0, 0, 0}, 2.0f));
-    std::vector<ray> mesh_rays = rays_into(rng, canopy::build_binned_sah(spheres).bounds(), sized(200, 2000));
+    std::vector<ray> mesh_rays = random_rays(rng, canopy::build_binned_sah(spheres).bounds(), sized(200, 2000));
     for (vec3<float> const& v : features_of(spheres).vertices) mesh_rays.push_back({v * 2.5f, 0.0f, -v * 1.5f, inf});
     run(spheres, mesh_rays, "mesh");
 
@@ -1235,7 +1189,7 @@ struct alpha_cutout_with_box_hook : canopy::basic_intersector<alpha_cutout_with_
 
 TEST_CASE("closest hit through the BVH with an alpha intersector equals a brute-force loop with the same intersector") {
     random_source rng(1001);
-    auto const mesh = concatenate(concatenate(canopy::make_icosphere(3, {0, 0, 0}, 2.0f), random_soup(rng, 400, 4.0f, 1.5f)),
+    auto const mesh = concatenate(concatenate(canopy::make_icosphere(3, {0, 0, 0}, 2.0f), triangle_soup(rng, 400, 4.0f, 1.5f)),
                                   translated(canopy::make_grid(8, 8), {-4.0f, -4.0f, -1.0f}));
     instanced_scene const scene(mesh, rng);
     failure_log differences;
@@ -1243,7 +1197,7 @@ TEST_CASE("closest hit through the BVH with an alpha intersector equals a brute-
     alpha_cutout_with_box_hook hooked;
     // Random rays, and rays through the icosphere's vertices (equal t in several triangles: the
     // smaller prim_id must win, as in the brute force).
-    std::vector<ray> rays_in = rays_into(rng, scene.top.bounds(), sized(1500, 20'000));
+    std::vector<ray> rays_in = random_rays(rng, scene.top.bounds(), sized(1500, 20'000));
     for (vec3<float> const& v : features_of(canopy::make_icosphere(3, {0, 0, 0}, 2.0f)).vertices)
         rays_in.push_back({v * 2.5f, 0.0f, -v * 1.5f, inf});
     for (ray const& r : rays_in) {
@@ -1600,12 +1554,12 @@ TEST_CASE("rays from inside real closed meshes never miss (glmark2 bunny, CGAL s
 
 TEST_CASE("scaling the whole scene by 2^k gives the same triangles, u, v bit for bit and t scaled exactly") {
     random_source rng(1401);
-    auto const mesh = concatenate(canopy::make_icosphere(3, {0, 0, 0}, 2.0f), random_soup(rng, 300, 4.0f, 1.0f));
+    auto const mesh = concatenate(canopy::make_icosphere(3, {0, 0, 0}, 2.0f), triangle_soup(rng, 300, 4.0f, 1.0f));
     auto const rows = random_rotation_rows(rng);
-    auto const rays = rays_into(rng, canopy::build_binned_sah(mesh).bounds(), sized(300, 5000));
+    auto const rays = random_rays(rng, canopy::build_binned_sah(mesh).bounds(), sized(300, 5000));
     // Instances: identity, translated, rotated with a translation; all translations scale with the scene.
     std::array<transform, 3> const placements{
-        transform::identity(), make_transform({dvec3{1, 0, 0}, dvec3{0, 1, 0}, dvec3{0, 0, 1}}, {1, 1, 1}, {6.5f, -1.25f, 2.0f}),
+        transform::identity(), make_transform(no_rotation, {1, 1, 1}, {6.5f, -1.25f, 2.0f}),
         make_transform(rows, {0.75, 1.5, 1.0}, {-5.0f, 3.0f, 1.0f})};
 
     struct results {
@@ -1660,7 +1614,7 @@ TEST_CASE("rotating the vertex order of every triangle keeps hits and prims, wit
     auto const mesh = concatenate(concatenate(make_dyadic_sphere(3, 12), make_fan({1.0f, -2.0f, 0.5f}, [](float x, float y) {
                                                   return x * 0.5f + y * 0.25f;
                                               })),
-                                  random_soup(rng, 100, 3.0f, 1.0f));
+                                  triangle_soup(rng, 100, 3.0f, 1.0f));
     auto rotate = [](std::vector<triangle> tris) {
         for (triangle& t : tris) t = {t.v1, t.v2, t.v0, t.prim_id, t.geom_id};
         return tris;
@@ -1676,10 +1630,10 @@ TEST_CASE("rotating the vertex order of every triangle keeps hits and prims, wit
     for (auto const& e : f.edges) rays.push_back({{0, 0, 0}, 0.0f, e[0] + e[1], inf});
     for (auto const& e : f.edges) {
         vec3<float> const target = (e[0] + e[1]) * 0.5f;
-        vec3<float> const o = target + rng.dyadic_point(6.0f, 3);
+        vec3<float> const o = target + rng.dyadic_point(-6.0f, 6.0f, 3);
         rays.push_back({o, 0.0f, target - o, inf});
     }
-    for (ray const& r : rays_into(rng, b.bounds(), sized(1000, 10'000))) rays.push_back(r);
+    for (ray const& r : random_rays(rng, b.bounds(), sized(1000, 10'000))) rays.push_back(r);
 
     // u, v of the rotated triangles come from the same edge functions divided by a sum taken in
     // another order: equal within 8 ulps.
@@ -1724,9 +1678,9 @@ TEST_CASE("rotating the vertex order of every triangle keeps hits and prims, wit
 
 TEST_CASE("scalar, packet and two-thread tracing give bit-identical results") {
     random_source rng(1601);
-    auto const mesh = concatenate(canopy::make_icosphere(3, {0, 0, 0}, 2.0f), random_soup(rng, 500, 4.0f, 1.0f));
+    auto const mesh = concatenate(canopy::make_icosphere(3, {0, 0, 0}, 2.0f), triangle_soup(rng, 500, 4.0f, 1.0f));
     instanced_scene const scene(mesh, rng);
-    std::vector<ray> rays = rays_into(rng, scene.top.bounds(), sized(4096, 65'536));
+    std::vector<ray> rays = random_rays(rng, scene.top.bounds(), sized(4096, 65'536));
     // Some finite tmax, some tmin > 0, some inactive lanes.
     for (std::size_t i = 0; i < rays.size(); ++i) {
         if (i % 5 == 1) rays[i].tmax = rng.uniform(1.0f, 10.0f);

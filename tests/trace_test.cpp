@@ -20,6 +20,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "test_support.hpp"
+
 import canopy.query;
 import canopy.bench_formats;
 import canopy.procedural;
@@ -28,25 +30,11 @@ import canopy.image_io;
 namespace {
 
 namespace fs = std::filesystem;
+using test_support::temp_folder;
 using canopy::vec3;
 
 constexpr float inf = std::numeric_limits<float>::infinity();
 constexpr float nan = std::numeric_limits<float>::quiet_NaN();
-
-// A folder of its own for each test case, removed afterwards.
-struct temp_folder {
-    fs::path path;
-    temp_folder() : path(fs::temp_directory_path() / ("canopy_cli_test_" + std::to_string(::getpid()))) {
-        fs::remove_all(path);
-        fs::create_directories(path);
-    }
-    ~temp_folder() {
-        std::error_code ignored;
-        fs::remove_all(path, ignored);
-    }
-    temp_folder(temp_folder const&) = delete;
-    temp_folder& operator=(temp_folder const&) = delete;
-};
 
 struct run_result {
     int exit_code = -1;
@@ -221,7 +209,7 @@ hit_fields fields_at(std::string const& bytes, std::size_t i) {
 
 // The generated files and the same geometry built in memory.
 struct trace_fixture {
-    temp_folder folder;
+    temp_folder folder{"canopy_cli_test"};
     std::vector<canopy::triangle> triangles = make_mesh();
     std::vector<std::array<float, 12>> rows = make_instances();
     canopy::bvh<canopy::triangle> mesh;
@@ -401,7 +389,7 @@ TEST_CASE("canopy trace rejects a ray file whose size is not a multiple of 32, n
 }
 
 TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") {
-    temp_folder const folder;
+    temp_folder const folder("canopy_cli_test");
     std::string const out = (folder.path / "x.hits").string();
     struct bad_call {
         std::vector<std::string> args;
@@ -439,7 +427,7 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
 }
 
 TEST_CASE("canopy render with no scene writes the four Figure-1 images at the requested size") {
-    temp_folder const folder;
+    temp_folder const folder("canopy_cli_test");
     fs::path const out = folder.path / "figures";
     auto const result = run_canopy({"render", "-o", out.string(), "--size", "40x30"});
     INFO(result.output);
@@ -456,7 +444,7 @@ TEST_CASE("canopy render with no scene writes the four Figure-1 images at the re
 }
 
 TEST_CASE("canopy render SCENE writes one image named after the scene") {
-    temp_folder const folder;
+    temp_folder const folder("canopy_cli_test");
     write_obj(folder.path / "mesh.obj", make_mesh());
     write_inst(folder.path / "lattice.inst", "mesh.obj", make_instances());
     auto const result = run_canopy({"render", (folder.path / "lattice.inst").string(), "-o", folder.path.string(),

@@ -1,0 +1,101 @@
+// Random test geometry shared by the core tests (intersector, bvh, query, stress): a seeded
+// random source, random affine transforms, triangle soups, rays into a box, and a three-level
+// instanced scene. Fixed seeds: every run tests the same cases.
+//
+// Include it after the test file's `import canopy.query;` (or `import canopy.geometry;`, for
+// what needs no BVH): it uses <array>, <cmath>, <cstdint>, <limits>, <random> and <vector>,
+// which the test file includes before its imports (standard headers may not follow an import).
+#pragma once
+
+namespace test_support {
+
+struct random_source {
+    std::mt19937 engine;
+    explicit random_source(std::uint32_t seed) : engine(seed) {}
+    float uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
+    double uniform_double(double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(engine); }
+    int integer(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(engine); }
+    canopy::vec3<float> point(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
+    canopy::vec3<float> point_in(canopy::aabb const& b) {
+        return {uniform(b.min.x, b.max.x), uniform(b.min.y, b.max.y), uniform(b.min.z, b.max.z)};
+    }
+    // A multiple of 2^-k in [lo, hi]: exactly representable, differences of such values too.
+    float dyadic(float lo, float hi, int k) {
+        float const scale = std::ldexp(1.0f, k);
+        return static_cast<float>(integer(static_cast<int>(lo * scale), static_cast<int>(hi * scale))) / scale;
+    }
+    canopy::vec3<float> dyadic_point(float lo, float hi, int k) { return {dyadic(lo, hi, k), dyadic(lo, hi, k), dyadic(lo, hi, k)}; }
+    canopy::vec3<float> dyadic_point(canopy::vec3<float> lo, canopy::vec3<float> hi, int k) {
+        return {dyadic(lo.x, hi.x, k), dyadic(lo.y, hi.y, k), dyadic(lo.z, hi.z, k)};
+    }
+    // A point of the unit ball.
+    canopy::vec3<float> in_ball() {
+        for (;;) {
+            canopy::vec3<float> const p = point(-1.0f, 1.0f);
+            if (canopy::dot(p, p) <= 1.0f) return p;
+        }
+    }
+    // A direction, uniform over the sphere, of length in [0.1, 1] (not normalised).
+    canopy::vec3<float> direction() {
+        for (;;) {
+            canopy::vec3<float> const p = point(-1.0f, 1.0f);
+            float const l2 = canopy::dot(p, p);
+            if (l2 >= 0.01f && l2 <= 1.0f) return p;
+        }
+    }
+};
+
+inline canopy::ray make_ray(canopy::vec3<float> origin, canopy::vec3<float> direction, float tmin = 0.0f,
+                            float tmax = std::numeric_limits<float>::infinity()) {
+    return {origin, tmin, direction, tmax};
+}
+
+// `count` triangles of corners within `size` of centres within `extent` of the origin;
+// prim_id = index (what the builder assigns), geom_id = index mod 3.
+inline std::vector<canopy::triangle> triangle_soup(random_source& rng, int count, float extent, float size) {
+    std::vector<canopy::triangle> soup;
+    for (int i = 0; i < count; ++i) {
+        canopy::vec3<float> const c = rng.point(-extent, extent);
+        soup.push_back({c + rng.point(-size, size), c + rng.point(-size, size), c + rng.point(-size, size),
+                        static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(i % 3)});
+    }
+    return soup;
+}
+
+// Rays from around the box towards random points inside it.
+inline std::vector<canopy::ray> random_rays(random_source& rng, canopy::aabb const& bounds, int count) {
+    canopy::vec3<float> const c = (bounds.min + bounds.max) * 0.5f;
+    float const r = canopy::length(bounds.max - bounds.min);
+    std::vector<canopy::ray> rays;
+    for (int i = 0; i < count; ++i) {
+        canopy::vec3<float> const origin = c + rng.point(-r, r);
+        rays.push_back(make_ray(origin, rng.point_in(bounds) - origin));
+    }
+    return rays;
+}
+
+// Rotation (random unit quaternion) × non-uniform scale in [0.5, 2], plus a translation in
+// [-translation, translation]^3.
+inline canopy::affine_transform<float> random_transform(random_source& rng, float translation) {
+    std::normal_distribution<double> normal;
+    double q[4];
+    double norm = 0;
+    for (double& c : q) {
+        c = normal(rng.engine);
+        norm += c * c;
+    }
+    for (double& c : q) c /= std::sqrt(norm);
+    double const w = q[0], x = q[1], y = q[2], z = q[3];
+    double const rot[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+                              {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+                              {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+    double const s[3] = {rng.uniform(0.5f, 2.0f), rng.uniform(0.5f, 2.0f), rng.uniform(0.5f, 2.0f)};
+    std::array<float, 12> rows{};
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) rows[std::size_t(4 * i + j)] = static_cast<float>(rot[i][j] * s[j]);
+        rows[std::size_t(4 * i + 3)] = rng.uniform(-translation, translation);
+    }
+    return canopy::affine_transform<float>::from_rows(rows);
+}
+
+} // namespace test_support

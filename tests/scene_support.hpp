@@ -1,0 +1,50 @@
+// Helpers shared by the scene and plugin tests: catching the scene_error that bad input must give.
+//
+// Include it after the test file's `import` lines (one of them must bring canopy.scene): it uses
+// <filesystem>, <string>, <string_view> and Catch2, which the test file includes before its
+// imports (standard headers may not follow an import).
+#pragma once
+
+namespace test_support {
+
+// The scene_error that f throws. A failed check if it throws none (the error returned then says
+// "(no scene_error)"); any other exception propagates.
+inline canopy::scene_error error_of(auto&& f) {
+    try {
+        f();
+    } catch (canopy::scene_error const& e) {
+        return e;
+    }
+    FAIL_CHECK("no scene_error");
+    return canopy::scene_error("", "", "(no scene_error)");
+}
+
+// The message (what()) of the scene_error that f throws, as error_of.
+inline std::string message_of(auto&& f) { return error_of(f).what(); }
+
+struct load_failure_report {
+    std::string file, where, problem, message;
+};
+
+// Loads `file` through `r` (with `plugin`, if named) into a scene that holds one group, expecting
+// a scene_error: the scene must be left as it was (no node, mesh, material or image added). A
+// failed check, and an empty report, if the load succeeds.
+inline load_failure_report load_failure(canopy::registry const& r, std::filesystem::path const& file,
+                                        std::string_view plugin = {}) {
+    canopy::scene s;
+    s.add_group(s.root(), "before");
+    auto const nodes = s.nodes().size();
+    try {
+        r.load(s, file, s.root(), plugin);
+    } catch (canopy::scene_error const& e) {
+        CHECK(s.nodes().size() == nodes);
+        CHECK(s.meshes().empty());
+        CHECK(s.materials().empty());
+        CHECK(s.images().empty());
+        return {e.file(), e.where(), e.problem(), e.what()};
+    }
+    FAIL_CHECK("no scene_error for " << file);
+    return {};
+}
+
+} // namespace test_support
