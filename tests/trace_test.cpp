@@ -2,7 +2,9 @@
 // and its .hits output is compared, byte for byte, with closest_hit / any_hit of the library
 // called in this test on the same geometry (with the bench alpha intersector for
 // `--intersector alpha`); bad input and bad options must fail with a message; `canopy render`
-// must write readable images of the requested size.
+// must write readable images of the requested size. For scene files and generators, `canopy info`
+// must report what compile() decides in this test, `canopy render` must use the scene's camera,
+// and plugins named with --plugin or CANOPY_PLUGIN_PATH must be loaded.
 #include <catch2/catch.hpp>
 
 #include <array>
@@ -26,6 +28,7 @@ import canopy.query;
 import canopy.bench_formats;
 import canopy.procedural;
 import canopy.image_io;
+import canopy.plugins;
 
 namespace {
 
@@ -455,4 +458,107 @@ TEST_CASE("canopy render SCENE writes one image named after the scene") {
     auto const image = canopy::read_image(folder.path / "lattice.png");
     CHECK(image.width == 32);
     CHECK(image.height == 24);
+}
+
+// ---- scene files, generators and plugins through the command line ---------------------------
+
+namespace {
+
+// Two instances of a two-mesh prototype and one untransformed mesh, with a camera looking at a red
+// square that fills the middle of the view (the rest is sky).
+std::string const scene_json = R"({
+  "materials": [{"name": "red", "colour": [1, 0, 0]}],
+  "meshes": [
+    {"name": "square", "material": "red", "positions": [-1, -1, 0,  1, -1, 0,  1, 1, 0,  -1, 1, 0], "indices": [0, 1, 2,  0, 2, 3]},
+    {"name": "post", "positions": [0, 0, -5,  0.1, 0, -5,  0, 0.1, -5], "indices": [0, 1, 2]}
+  ],
+  "prototypes": [{"name": "pair", "type": "group", "children": [
+    {"type": "mesh", "mesh": "post"},
+    {"type": "transform", "translate": [0, 0.5, 0], "children": [{"type": "mesh", "mesh": "post"}]}]}],
+  "nodes": [
+    {"type": "mesh", "mesh": "square"},
+    {"type": "instance", "target": "pair", "translate": [30, 0, 0]},
+    {"type": "instance", "target": "pair", "translate": [-30, 0, 0]},
+    {"type": "camera", "eye": [0, 0, 4], "target": [0, 0, 0], "fovy": 60}
+  ]
+})";
+
+} // namespace
+
+TEST_CASE("canopy info SCENE reports the counts and every decision compile() makes") {
+    temp_folder const folder("canopy_cli_scene_test");
+    auto const file = folder.write("pairs.json", scene_json);
+    canopy::registry const& r = canopy::builtin_registry();
+    canopy::scene const s = canopy::load_scene(file, r);
+    canopy::compiled_scene const c = canopy::compile(s, {.plugins = &r});
+    REQUIRE(c.levels == 2); // the reference below is of a two-level scene
+    auto const result = run_canopy({"info", file.string()});
+    INFO(result.output);
+    REQUIRE(result.exit_code == 0);
+    CHECK_THAT(result.output, Catch::Contains(std::to_string(s.nodes().size()) + " nodes, 2 meshes, 1 materials"));
+    CHECK_THAT(result.output, Catch::Contains("2 instance levels"));
+    CHECK_THAT(result.output, Catch::Contains(std::to_string(c.statistics.triangles_placed) + " triangles placed"));
+    for (auto const& decision : c.statistics.decisions) CHECK_THAT(result.output, Catch::Contains("- " + decision));
+    CHECK_THAT(result.output, Catch::Contains("top-level BVH: 3 primitives"));
+}
+
+TEST_CASE("canopy render SCENE uses the scene's camera") {
+    temp_folder const folder("canopy_cli_scene_test");
+    auto const file = folder.write("pairs.json", scene_json);
+    auto const result = run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "40x40"});
+    INFO(result.output);
+    REQUIRE(result.exit_code == 0);
+    auto const image = canopy::read_image(folder.path / "pairs.png");
+    REQUIRE(image.width == 40);
+    // From (0, 0, 4) with a 60° field of view the square covers |x|, |y| < tan(30°)⁻¹ / 4 ≈ 0.43 of
+    // the half-width around the centre: the centre is red, a corner is sky (bluish).
+    float const* centre = image.at(20, 20);
+    float const* corner = image.at(1, 1);
+    CHECK(centre[0] > 2.0f * centre[1]);
+    CHECK(centre[0] > 2.0f * centre[2]);
+    CHECK(corner[2] > corner[0]);
+}
+
+TEST_CASE("canopy render and info load shared-library plugins given by --plugin or CANOPY_PLUGIN_PATH") {
+    temp_folder const folder("canopy_cli_scene_test");
+    auto const without = run_canopy({"info", "gen:spiral_staircase:steps=5"});
+    CHECK(without.exit_code == 1);
+    CHECK_THAT(without.output, Catch::Contains("generator 'spiral_staircase': is not registered"));
+
+    auto const rendered = run_canopy({"render", "gen:spiral_staircase:steps=5", "--plugin", CANOPY_SPIRAL_PLUGIN, "-o",
+                                      folder.path.string(), "--size", "24x24"});
+    INFO(rendered.output);
+    REQUIRE(rendered.exit_code == 0);
+    CHECK(canopy::read_image(folder.path / "spiral_staircase.png").width == 24);
+
+    // 12 triangles per step (the plugin's documented count), through the environment variable.
+    std::string const plugin_folder = fs::path(CANOPY_SPIRAL_PLUGIN).parent_path().string();
+    REQUIRE(::setenv("CANOPY_PLUGIN_PATH", plugin_folder.c_str(), 1) == 0);
+    auto const info = run_canopy({"info", "gen:spiral_staircase:steps=5"});
+    ::unsetenv("CANOPY_PLUGIN_PATH");
+    INFO(info.output);
+    REQUIRE(info.exit_code == 0);
+    CHECK_THAT(info.output, Catch::Contains("(60 triangles stored)"));
+
+    auto const listed = run_canopy({"info", "--plugins", "--plugin", CANOPY_SPIRAL_PLUGIN});
+    CHECK(listed.exit_code == 0);
+    for (char const* name : {".gltf", ".glb", ".json", ".ply", ".off", ".stl", ".om", ".inst", ".png", "sphere",
+                             "terrain", "billboard_forest", "spiral_staircase", "canopy_plugin_spiral.so"})
+        CHECK_THAT(listed.output, Catch::Contains(name));
+}
+
+TEST_CASE("canopy render and info name the file, the line and the problem for a bad scene file") {
+    temp_folder const folder("canopy_cli_scene_test");
+    auto const obj = folder.write("broken.obj", "v 0 0 0\nv 1 0 0\nv 0 q 0\nf 1 2 3\n");
+    for (std::vector<std::string> const& call : {std::vector<std::string>{"info", obj.string()},
+                                                 std::vector<std::string>{"render", obj.string(), "-o", folder.path.string()}}) {
+        auto const result = run_canopy(call);
+        std::string const& command = call[0];
+        INFO(command << ": " << result.output);
+        CHECK(result.exit_code == 1);
+        CHECK_THAT(result.output, Catch::Contains(obj.string() + ":3: bad number 'q'"));
+    }
+    auto const unknown = run_canopy({"info", (folder.path / "scene.xyz").string()});
+    CHECK(unknown.exit_code == 1);
+    CHECK_THAT(unknown.output, Catch::Contains("unknown extension '.xyz'"));
 }
