@@ -719,6 +719,9 @@ node_id load_gltf(scene& s, fs::path const& file, node_id parent, registry const
         throw scene_error(file.string(), "", std::string("tinygltf: ") + e.what());
     }
     if (!loaded) throw scene_error(file.string(), "", tidy(err.empty() ? warn : err));
+    if (!model.asset.version.starts_with("2"))
+        throw scene_error(file.string(), "asset.version",
+                          "glTF '" + model.asset.version + "' is not supported (this loader reads glTF 2.0)");
     scene::mark const mark = s.make_mark();
     try {
         return converter(model, file, s, r).run(parent);

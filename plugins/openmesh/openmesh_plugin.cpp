@@ -247,9 +247,8 @@ struct file_checker {
             if (type == "float" || type == "float32") return as(float{});
             return as(double{});
         }
-        std::string where(std::string const& element, long long i) const {
-            return element + " " + std::to_string(i);
-        }
+        // Binary data has no lines: the messages name the element and its index themselves.
+        std::string where(std::string const&, long long) const { return {}; }
         std::string describe(double v) const {
             std::ostringstream s;
             s.precision(9);
