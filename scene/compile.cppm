@@ -26,10 +26,10 @@
 module;
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <cstdint>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -59,12 +59,6 @@ namespace canopy {
 namespace {
 
 using xf64 = affine_transform<double>;
-
-// IEC 61966-2-1 decoding, in double, rounded once.
-float srgb_to_linear(float encoded) {
-    double const c = double(encoded);
-    return float(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
-}
 
 xf64 widen(affine_transform<float> const& a) {
     return {{vec3<double>(a.linear.col0), vec3<double>(a.linear.col1), vec3<double>(a.linear.col2)},
@@ -101,7 +95,6 @@ struct item {
     frame where;
     std::uint32_t id; // the user id of the instance node that placed it, or invalid_id
 };
-using mesh_item = item;
 
 std::string node_label(scene const& s, node_id n) {
     node const& nd = s.at(n);
@@ -128,7 +121,7 @@ public:
             std::uint32_t id;
         };
         std::vector<group_item> groups_placed;
-        std::vector<mesh_item> meshes; // in the order of the graph
+        std::vector<item> meshes; // in the order of the graph
         for (auto const& st : found) {
             if (st.target == no_node) {
                 meshes.push_back(st);
@@ -297,7 +290,7 @@ public:
 private:
     struct prototype {
         std::string name;
-        std::vector<mesh_item> meshes; // in the subtree's frame, deeper nesting flattened
+        std::vector<item> meshes; // in the subtree's frame, deeper nesting flattened
         bool done = false;
     };
 
@@ -308,7 +301,7 @@ private:
     }
 
     // Places scene mesh `source` (its compiled index is assigned on first use).
-    void add_placement(std::vector<placement>& out, mesh_item const& m) {
+    void add_placement(std::vector<placement>& out, item const& m) {
         out.push_back({compiled_mesh_of(m.mesh), m.where.rounded(), m.id});
         ++stats_.placements;
         if (out.back().transform.is_identity()) ++stats_.identity_placements;
@@ -331,7 +324,7 @@ private:
             break;
         case node_kind::mesh:
             if (s_.meshes()[nd.mesh].triangles.empty()) {
-                empty_meshes_.insert({nd.mesh, true});
+                empty_meshes_.insert(nd.mesh);
                 break;
             }
             found.push_back({nd.mesh, no_node, where, invalid_id});
@@ -372,7 +365,7 @@ private:
         p.name = s_.at(target).name;
         std::vector<item> found;
         walk(target, frame{}, found, false);
-        std::vector<mesh_item> meshes;
+        std::vector<item> meshes;
         for (auto const& st : found) {
             if (st.target == no_node) {
                 meshes.push_back(st);
@@ -448,7 +441,7 @@ private:
     std::map<node_id, std::uint32_t> group_index_;
     std::vector<prototype> group_protos_;
     std::map<std::uint32_t, std::uint32_t> mesh_map_; // scene mesh → compiled mesh
-    std::map<std::uint32_t, bool> empty_meshes_;
+    std::set<std::uint32_t> empty_meshes_;
     std::size_t direct_single_mesh_ = 0;
     std::optional<camera_data> camera_;
     std::vector<light_data> lights_;

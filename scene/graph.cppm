@@ -83,6 +83,11 @@ struct image_data {
     bool srgb = false;
 };
 
+// An sRGB-encoded value in [0, 1] to linear (IEC 61966-2-1), in double, rounded once.
+float srgb_to_linear(double encoded) {
+    return float(encoded <= 0.04045 ? encoded / 12.92 : std::pow((encoded + 0.055) / 1.055, 2.4));
+}
+
 struct camera_data {
     // In the camera node's frame: looks from eye towards target. Placed by the transforms above.
     vec3<float> eye{0.0f, 0.0f, 5.0f};

@@ -468,16 +468,29 @@ std::pair<int, int> parse_size(std::string const& text) {
     return {w, h};
 }
 
-int run_render(std::span<char*> args) {
+// Takes every `--plugin FILE` out of args (render and info accept it, repeated); the other
+// arguments stay, in order, in `rest`.
+std::vector<std::string> take_plugin_files(std::span<char*> args, std::vector<char*>& rest) {
+    std::vector<std::string> files;
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        if (std::string_view(args[i]) != "--plugin") {
+            rest.push_back(args[i]);
+            continue;
+        }
+        if (i + 1 >= args.size()) throw usage_error("option '--plugin' needs a value");
+        files.emplace_back(args[++i]);
+    }
+    return files;
+}
+
+int run_render(std::span<char*> all_args) {
+    std::vector<char*> args;
+    std::vector<std::string> const plugin_files = take_plugin_files(all_args, args);
     std::optional<std::string> scene_path;
     std::vector<char*> option_args;
-    std::vector<std::string> plugin_files;
     for (std::size_t i = 0; i < args.size(); ++i) {
         std::string_view const a = args[i];
-        if (a == "--plugin") {
-            if (i + 1 >= args.size()) throw usage_error("option '--plugin' needs a value");
-            plugin_files.emplace_back(args[++i]);
-        } else if (!a.starts_with("-") && (i == 0 || !std::string_view(args[i - 1]).starts_with("-"))) {
+        if (!a.starts_with("-") && (i == 0 || !std::string_view(args[i - 1]).starts_with("-"))) {
             if (scene_path) throw usage_error("more than one scene given");
             scene_path = std::string(a);
         } else {
@@ -589,9 +602,10 @@ void print_registered(char const* what, std::vector<canopy::registered> const& l
         fmt::print("  {:<20} {:<12} {}\n", e.name, e.plugin, e.description);
 }
 
-int run_info(std::span<char*> args) {
+int run_info(std::span<char*> all_args) {
+    std::vector<char*> args;
+    std::vector<std::string> const plugin_files = take_plugin_files(all_args, args);
     std::optional<std::string> scene_path;
-    std::vector<std::string> plugin_files;
     bool list_plugins = false;
     for (std::size_t i = 0; i < args.size(); ++i) {
         std::string_view const a = args[i];
@@ -601,9 +615,6 @@ int run_info(std::span<char*> args) {
         }
         if (a == "--plugins") {
             list_plugins = true;
-        } else if (a == "--plugin") {
-            if (i + 1 >= args.size()) throw usage_error("option '--plugin' needs a value");
-            plugin_files.emplace_back(args[++i]);
         } else if (a.starts_with("-")) {
             throw usage_error("unknown option '" + std::string(a) + "'");
         } else {

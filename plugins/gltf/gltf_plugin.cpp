@@ -51,10 +51,6 @@ std::string tidy(std::string const& message) {
     return out.empty() ? std::string("tinygltf could not load the file") : out;
 }
 
-float srgb_to_linear(double c) {
-    return float(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
-}
-
 // "%20" → " " (glTF URIs are percent-encoded).
 std::string decode_uri(std::string const& uri) {
     std::string out;
