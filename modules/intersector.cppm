@@ -20,6 +20,9 @@
 // - With default_intersector, or with hooks that only forward, the calls inline to exactly the
 //   default tests: no cost.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <concepts>
 #include <type_traits>
 #include <utility>

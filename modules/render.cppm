@@ -13,6 +13,9 @@
 //                             albedo)
 //   s.background(r)         → vec3<float>
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <atomic>
 #include <cmath>

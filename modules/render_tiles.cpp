@@ -1,5 +1,8 @@
 // canopy.render: the tile scheduler (oneTBB), compiled once here.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <atomic>
 #include <functional>

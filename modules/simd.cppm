@@ -13,6 +13,9 @@
 // conversion, and one documented order for horizontal reductions. Only which NaN a NaN result
 // carries may differ.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 
 #include <array>
 #include <bit>

@@ -3,6 +3,9 @@
 // They are ordinary (non-template) functions compiled into this module's object file, so
 // importers instantiate no oneTBB templates themselves.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <cstddef>
 #include <functional>
 #include <tbb/blocked_range.h>

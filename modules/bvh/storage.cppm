@@ -7,6 +7,9 @@
 // reordered so that each leaf owns a contiguous range. Depth never exceeds bvh_max_depth (the
 // builder enforces it), which bounds every traversal stack.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>
 #include <cstddef>

@@ -13,6 +13,9 @@
 // when any active lane hits it. The memory of every hit child is prefetched as soon as the node
 // test is done, so that cache misses overlap (incoherent rays in large BVHs are memory-bound).
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <bit>
 #include <cstdint>

@@ -5,6 +5,9 @@
 // Wald et al. 2008 / Embree). Leaves are kept as they are: every primitive stays in exactly one
 // leaf. The wide tree is never deeper than the binary one.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <cstdint>
 #include <limits>
 #include <vector>

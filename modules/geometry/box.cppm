@@ -7,6 +7,9 @@
 // such a NaN drops out (the slab then holds the whole ray): conservative. NaN in tmin or
 // tmax makes every comparison fail: such rays miss.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <type_traits>
 export module canopy.geometry:box;
 import canopy.math;

@@ -8,6 +8,9 @@
 // Points are in the triangle's own (object) space; for instanced geometry, transform the ray
 // afterwards or spawn from the world-space triangle.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <bit>
 #include <cmath>
 #include <cstdint>

@@ -4,6 +4,9 @@
 // of Haines et al., "Precision Improvements for Ray/Sphere Intersection", Ray Tracing Gems
 // (2019), ch. 7. Reports the nearest root in [tmin, tmax]; u, v are 0.
 module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
 #include <cstdint>
 #include <type_traits>
 export module canopy.geometry:sphere;
