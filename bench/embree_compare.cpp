@@ -1,6 +1,7 @@
 // embree_compare — Canopy and Embree 3 side by side on the same scenes and rays.
 //
 //   canopy_bench_embree [--scene FILE.obj|FILE.inst] [--threads-list 1,2] [--repeat N]
+//                       [--rays primary,random,shadow]
 //
 // Without --scene it generates two scenes: a closed icosphere (327,680 triangles) and a
 // two-level scene (64 instances of a 20,480-triangle icosphere). For each: build time and
@@ -236,7 +237,24 @@ double measure(std::size_t n, int repeat, std::function<void(std::size_t, std::s
     return best;
 }
 
-void run_scene(scene_input const& in, std::vector<int> const& thread_counts, int repeat) {
+// Comma-separated list → items.
+std::vector<std::string> split_list(char const* text) {
+    std::vector<std::string> items;
+    std::string item;
+    for (char const* p = text;; ++p) {
+        if (*p == ',' || *p == '\0') {
+            if (!item.empty()) items.push_back(item);
+            item.clear();
+            if (*p == '\0') break;
+        } else {
+            item += *p;
+        }
+    }
+    return items;
+}
+
+void run_scene(scene_input const& in, std::vector<int> const& thread_counts, int repeat,
+               std::vector<std::string> const& ray_sets) {
     fmt::print("\n## {} ({} triangles{})\n\n", in.name, in.mesh.size(),
                in.instances.empty() ? "" : fmt::format(", {} instances", in.instances.size()));
     fmt::print("| threads | figure | Canopy | Embree | Canopy/Embree |\n|---|---|---|---|---|\n");
@@ -269,6 +287,7 @@ void run_scene(scene_input const& in, std::vector<int> const& thread_counts, int
         canopy::aabb const box = cs->instanced ? cs->top.bounds() : cs->mesh.bounds();
         auto const sets = make_rays(*cs, box);
         for (auto const& set : sets) {
+            if (std::find(ray_sets.begin(), ray_sets.end(), set.name) == ray_sets.end()) continue;
             for (bool closest : {true, false}) {
                 if (set.shadow && closest) continue;
                 for (bool alpha : {false, true}) {
@@ -305,10 +324,17 @@ int main(int argc, char** argv) {
     std::vector<int> threads{1, 2};
     int repeat = 3;
     std::string scene_path;
-    for (int i = 1; i + 1 < argc; i += 2) {
+    std::vector<std::string> ray_sets{"primary", "random", "shadow"};
+    bool usage = false;
+    for (int i = 1; i < argc; i += 2) {
+        if (i + 1 == argc) {
+            usage = true;
+            break;
+        }
         std::string const name = argv[i];
         if (name == "--scene") scene_path = argv[i + 1];
         else if (name == "--repeat") repeat = std::max(1, std::atoi(argv[i + 1]));
+        else if (name == "--rays") ray_sets = split_list(argv[i + 1]);
         else if (name == "--threads-list") {
             threads.clear();
             for (char const* p = argv[i + 1]; *p;) {
@@ -317,9 +343,17 @@ int main(int argc, char** argv) {
                 if (*p) ++p;
             }
         } else {
-            std::fprintf(stderr, "usage: %s [--scene FILE.obj|FILE.inst] [--threads-list 1,2] [--repeat N]\n", argv[0]);
-            return 2;
+            usage = true;
         }
+    }
+    for (auto const& r : ray_sets)
+        if (r != "primary" && r != "random" && r != "shadow") usage = true;
+    if (usage) {
+        std::fprintf(stderr,
+                     "usage: %s [--scene FILE.obj|FILE.inst] [--threads-list 1,2] [--repeat N] "
+                     "[--rays primary,random,shadow]\n",
+                     argv[0]);
+        return 2;
     }
     std::vector<scene_input> scenes;
     if (!scene_path.empty()) {
@@ -342,5 +376,5 @@ int main(int argc, char** argv) {
     }
     fmt::print("# Canopy vs Embree {}.{}.{} (same scenes, same rays; best of {})\n", RTC_VERSION_MAJOR,
                RTC_VERSION_MINOR, RTC_VERSION_PATCH, repeat);
-    for (auto const& s : scenes) run_scene(s, threads, repeat);
+    for (auto const& s : scenes) run_scene(s, threads, repeat, ray_sets);
 }
