@@ -73,19 +73,34 @@ struct bin_scratch {
     std::vector<double> right_cost;
 };
 
+// Bounds of a range of primitives and of their centroids.
+template <typename S>
+struct range_bounds {
+    basic_aabb<S> bounds;
+    basic_aabb<S> centroids;
+};
+
+template <typename S>
+range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::size_t end) {
+    range_bounds<S> r;
+    for (std::size_t i = begin; i < end; ++i) {
+        r.bounds = extend(r.bounds, ctx.boxes[ctx.order[i]]);
+        r.centroids = extend(r.centroids, ctx.centers[ctx.order[i]]);
+    }
+    return r;
+}
+
+// Builds the subtree of order[begin, end) into nodes[node_index]; `range` holds the bounds of
+// those primitives and of their centroids (the parent computes them while partitioning, so no
+// node walks its primitives just for that).
 template <typename S>
 void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t node_index, std::size_t begin,
-                std::size_t end, int depth) {
+                std::size_t end, int depth, range_bounds<S> const& range) {
     auto& nodes = *ctx.nodes;
     auto const& opt = ctx.options;
     std::size_t const count = end - begin;
-
-    // Bounds of the primitives and of their centroids.
-    basic_aabb<S> bounds, centroid_bounds;
-    for (std::size_t i = begin; i < end; ++i) {
-        bounds = extend(bounds, ctx.boxes[ctx.order[i]]);
-        centroid_bounds = extend(centroid_bounds, ctx.centers[ctx.order[i]]);
-    }
+    basic_aabb<S> const& bounds = range.bounds;
+    basic_aabb<S> const& centroid_bounds = range.centroids;
     nodes[node_index].bounds = bounds;
 
     int prev = ctx.depth.load(std::memory_order_relaxed);
@@ -112,15 +127,28 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
         scale[std::size_t(axis)] = usable[std::size_t(axis)] ? S(bins) / extent : S(0);
     }
     auto& b = scratch.bins;
-    std::fill(b.begin(), b.end(), bin<S>{});
-    for (std::size_t i = begin; i < end; ++i) {
-        std::uint32_t const p = ctx.order[i];
-        for (int axis = 0; axis < 3; ++axis) {
-            if (!usable[std::size_t(axis)]) continue;
-            int const k = bin_index(ctx.centers[p][axis], lo[std::size_t(axis)], scale[std::size_t(axis)], bins);
-            auto& bb = b[std::size_t(axis * bins + k)];
-            bb.bounds = extend(bb.bounds, ctx.boxes[p]);
-            ++bb.count;
+    // Only the 3 · bins bins in use are cleared. The loop is kept scalar: vectorised, it becomes
+    // AVX-512 scatters, which cost more than the whole binning pass on some processors.
+#pragma clang loop vectorize(disable)
+    for (std::size_t k = 0, used = 3 * std::size_t(bins); k < used; ++k) b[k] = bin<S>{};
+    {
+        // Plain pointers: the stores into the bins must not make the compiler reload the arrays.
+        bin<S>* const bin_data = b.data();
+        std::uint32_t const* const order = ctx.order.data();
+        vec3<S> const* const centers = ctx.centers.data();
+        basic_aabb<S> const* const boxes = ctx.boxes.data();
+        for (std::size_t i = begin; i < end; ++i) {
+            std::uint32_t const p = order[i];
+            basic_aabb<S> const box = boxes[p];
+            vec3<S> const c = centers[p];
+            for (int axis = 0; axis < 3; ++axis) {
+                auto const a = std::size_t(axis);
+                if (!usable[a]) continue;
+                int const k = bin_index(c[axis], lo[a], scale[a], bins);
+                auto& bb = bin_data[std::size_t(axis * bins + k)];
+                bb.bounds = extend(bb.bounds, box);
+                ++bb.count;
+            }
         }
     }
     auto& right_cost = scratch.right_cost;
@@ -157,19 +185,34 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
     bool const fits_leaf = count <= std::size_t(opt.max_leaf_size);
     if (fits_leaf && (best_axis < 0 || split_cost >= leaf_cost)) return make_leaf();
 
-    // Partition by the chosen bin boundary, or by index when centroids coincide.
+    // Partition by the chosen bin boundary, gathering the children's centroid bounds on the way
+    // (their primitive bounds are the unions of their bins); or by index when centroids coincide.
     std::size_t mid;
+    range_bounds<S> left, right;
     if (best_axis >= 0) {
         S const axis_lo = lo[std::size_t(best_axis)];
         S const axis_scale = scale[std::size_t(best_axis)];
-        auto const first = ctx.order.begin() + std::ptrdiff_t(begin);
-        auto const last = ctx.order.begin() + std::ptrdiff_t(end);
-        auto const split = std::partition(first, last, [&](std::uint32_t p) {
-            return bin_index(ctx.centers[p][best_axis], axis_lo, axis_scale, bins) < best_split;
-        });
-        mid = std::size_t(split - ctx.order.begin());
+        std::size_t i = begin, j = end;
+        while (i < j) {
+            std::uint32_t const p = ctx.order[i];
+            if (bin_index(ctx.centers[p][best_axis], axis_lo, axis_scale, bins) < best_split) {
+                left.centroids = extend(left.centroids, ctx.centers[p]);
+                ++i;
+            } else {
+                right.centroids = extend(right.centroids, ctx.centers[p]);
+                std::swap(ctx.order[i], ctx.order[--j]);
+            }
+        }
+        mid = i;
+        auto const* ab = b.data() + best_axis * bins;
+        for (int k = 0; k < bins; ++k) {
+            auto& side = k < best_split ? left : right;
+            side.bounds = extend(side.bounds, ab[k].bounds);
+        }
     } else {
         mid = begin + count / 2;
+        left = bounds_of(ctx, begin, mid);
+        right = bounds_of(ctx, mid, end);
     }
 
     std::uint32_t const children = ctx.node_count.fetch_add(2, std::memory_order_relaxed);
@@ -179,12 +222,12 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
         parallel_invoke(
             [&] {
                 bin_scratch<S> own(opt.bins);
-                build_node(ctx, own, children, begin, mid, depth + 1);
+                build_node(ctx, own, children, begin, mid, depth + 1, left);
             },
-            [&] { build_node(ctx, scratch, children + 1, mid, end, depth + 1); });
+            [&] { build_node(ctx, scratch, children + 1, mid, end, depth + 1, right); });
     } else {
-        build_node(ctx, scratch, children, begin, mid, depth + 1);
-        build_node(ctx, scratch, children + 1, mid, end, depth + 1);
+        build_node(ctx, scratch, children, begin, mid, depth + 1, left);
+        build_node(ctx, scratch, children + 1, mid, end, depth + 1, right);
     }
 }
 
@@ -217,7 +260,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     result.nodes.resize(2 * n - 1);
     ctx.nodes = &result.nodes;
     detail::bin_scratch<S> scratch(options.bins);
-    detail::build_node(ctx, scratch, 0, 0, n, 0);
+    detail::build_node(ctx, scratch, 0, 0, n, 0, detail::bounds_of(ctx, 0, n));
     result.nodes.resize(ctx.node_count.load());
     result.depth = ctx.depth.load();
     result.wide_nodes = collapse_to_wide(result.nodes);
