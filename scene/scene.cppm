@@ -4,6 +4,7 @@
 //   registry.load(s, "forest.json");                  // :registry loaders, generators, node types, plugins
 //   canopy::compiled_scene c = canopy::compile(s);    // :compile  BVHs and instances, skip rules
 //   c.closest_hit(ray, isect);                        // :compiled what queries and kernels trace
+//   triangulate_polygon(corners);                     // :polygon  loaders' faces of n > 3 corners
 //
 // Built-in loaders and generators live in plugins/ (module canopy.plugins).
 export module canopy.scene;
@@ -12,3 +13,4 @@ export import :graph;
 export import :registry;
 export import :compiled;
 export import :compile;
+export import :polygon;

@@ -179,7 +179,7 @@ TEST_CASE("json: file meshes and textures load through the registry, relative to
     CHECK(c.statistics.triangles_placed == 6);
 }
 
-TEST_CASE("json: instances target prototypes by name; ids default to the count of instances before them") {
+TEST_CASE("json: instances target prototypes by name, ids default to the count of instances before them") {
     temp_folder const tmp("canopy_json_test");
     auto const file = tmp.write("instances.json", R"({
       "meshes": [{"name": "tri", "positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]}],
@@ -267,7 +267,7 @@ TEST_CASE("json: generators and custom node types receive their params as text")
     CHECK(s.at(s.at(custom).children.at(0)).name == "expanded");
 }
 
-TEST_CASE("json: bad input names the file, the JSON path and the problem; the scene is left as it was") {
+TEST_CASE("json: bad input names the file, the JSON path and the problem, the scene is left as it was") {
     temp_folder const tmp("canopy_json_test");
     auto const r = json_registry();
     std::string const tri = R"({"name": "tri", "positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]})";
@@ -367,7 +367,7 @@ TEST_CASE("json: nodes nested too deep and scenes that load themselves are error
     CHECK_THAT(loop.problem, Catch::Contains("a.json: the scene refers to itself"));
 }
 
-TEST_CASE("json: parse_json_scene reads a buffer; without a registry files and generators are errors") {
+TEST_CASE("json: parse_json_scene reads a buffer, without a registry files and generators are errors") {
     canopy::scene s;
     auto const group = canopy::parse_json_scene(
         R"({"meshes": [{"name": "t", "positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]}], "nodes": [{"type": "mesh", "mesh": "t"}]})",

@@ -103,6 +103,37 @@ TEST_CASE("obj: polygons are fanned, in file order, with negative indices relati
     }
 }
 
+TEST_CASE("obj: a non-convex face is ear-clipped: rays through its notch miss, rays through it hit") {
+    // An arrowhead whose fan from corner 1 would be (1 2 3) = the notch itself, then a square
+    // elsewhere (convex: fanned as always).
+    temp_folder const tmp("canopy_obj_test");
+    auto const file = tmp.write("arrow.obj", "v 2 2 0\nv 1 1 0\nv 0 2 0\nv 1 0.25 0\n"
+                                             "v 5 0 0\nv 6 0 0\nv 6 1 0\nv 5 1 0\n"
+                                             "f 1 2 3 4\nf 5 6 7 8\n");
+    auto const r = obj_registry();
+    canopy::scene s;
+    auto const meshes = meshes_of(s, r.load(s, file));
+    REQUIRE(meshes.size() == 1);
+    REQUIRE(meshes[0]->triangles.size() == 4);
+    auto const c = canopy::compile(s, {.plugins = &r});
+    canopy::default_intersector isect;
+    auto const hits = [&](float x, float y) {
+        canopy::ray const ray{{x, y, -1.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, 10.0f};
+        return bool(c.closest_hit(ray, isect).hit);
+    };
+    CHECK_FALSE(hits(1.0f, 1.5f));  // the notch
+    CHECK_FALSE(hits(1.5f, 1.9f));
+    CHECK_FALSE(hits(0.5f, 1.9f));
+    CHECK(hits(1.0f, 0.5f));        // the arrow's body
+    CHECK(hits(1.8f, 1.75f));       // its right barb
+    CHECK(hits(0.2f, 1.75f));       // its left barb
+    CHECK(hits(5.5f, 0.5f));        // the square
+    // The square keeps the fan's triangles (v5 v6 v7) (v5 v7 v8).
+    auto const sq0 = corners(*meshes[0], 2), sq1 = corners(*meshes[0], 3);
+    CHECK((same(sq0[0], {5, 0, 0}) && same(sq0[1], {6, 0, 0}) && same(sq0[2], {6, 1, 0})));
+    CHECK((same(sq1[0], {5, 0, 0}) && same(sq1[1], {6, 1, 0}) && same(sq1[2], {5, 1, 0})));
+}
+
 TEST_CASE("obj: a polygon of 50000 corners is fanned into 49998 triangles") {
     temp_folder const tmp("canopy_obj_test");
     constexpr int n = 50000;
@@ -195,7 +226,7 @@ TEST_CASE("obj: the benchmark OBJ subset reads identically: triangle i is the i-
     }
 }
 
-TEST_CASE("obj: one mesh per material in order of first use; MTL colours; undefined names use the default") {
+TEST_CASE("obj: one mesh per material in order of first use, MTL colours, undefined names use the default") {
     temp_folder const tmp("canopy_obj_test");
     tmp.write("colours.mtl", "# two materials\n"
                              "newmtl red\n"
@@ -242,7 +273,7 @@ TEST_CASE("obj: one mesh per material in order of first use; MTL colours; undefi
     CHECK(meshes[2]->positions.size() == 3);
 }
 
-TEST_CASE("obj: map_Kd loads through the registry; map_d or texture alpha makes an alpha mask with cutoff 0.5") {
+TEST_CASE("obj: map_Kd loads through the registry, map_d or texture alpha makes an alpha mask with cutoff 0.5") {
     temp_folder const tmp("canopy_obj_test");
     fs::create_directories(tmp.path / "maps");
     // 2x1 colour image: red opaque, green opaque; 1x1 grey alpha map 0.4 (102/255).
@@ -307,7 +338,7 @@ TEST_CASE("obj: map_Kd loads through the registry; map_d or texture alpha makes 
     CHECK(c.statistics.alpha_mask_needed);
 }
 
-TEST_CASE("obj: bad input names the file, the line and the problem; the scene is left as it was") {
+TEST_CASE("obj: bad input names the file, the line and the problem, the scene is left as it was") {
     temp_folder const tmp("canopy_obj_test");
     auto const r = obj_registry();
     std::string const tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
@@ -390,7 +421,7 @@ TEST_CASE("obj: bad material libraries and missing textures name the .mtl line")
     }
 }
 
-TEST_CASE("obj: parse_obj reads a buffer without files; textures are checked, not loaded, without a registry") {
+TEST_CASE("obj: parse_obj reads a buffer without files, textures are checked, not loaded, without a registry") {
     canopy::scene s;
     auto const group = canopy::parse_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 4 3\n", "buffer.obj", nullptr, s, s.root());
     REQUIRE(s.at(group).children.size() == 1);

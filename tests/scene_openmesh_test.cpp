@@ -420,7 +420,7 @@ TEST_CASE("PLY ASCII and binary (both byte orders) load positions, per-vertex no
     }
 }
 
-TEST_CASE("OFF loads positions and fans polygons; faces OpenMesh cannot connect are kept on their vertices") {
+TEST_CASE("OFF loads positions and fans polygons, faces OpenMesh cannot connect are kept on their vertices") {
     temp_folder const tmp("canopy_openmesh_test");
     tmp.write("pyramid.off", pyramid::off());
     canopy::scene s;
@@ -437,6 +437,25 @@ TEST_CASE("OFF loads positions and fans polygons; faces OpenMesh cannot connect 
     CHECK(r.mesh.positions.size() == 5);
     std::vector<std::array<std::uint32_t, 3>> const expected{{0, 1, 2}, {1, 0, 3}, {0, 1, 4}, {2, 2, 4}};
     CHECK(r.mesh.triangles == expected);
+}
+
+TEST_CASE("a non-convex OFF face is ear-clipped, a convex one fanned, both counted") {
+    // The arrowhead (2 2)(1 1)(0 2)(1 0.25): its fan from corner 0 would start with the notch
+    // (0 1 2). A convex quad follows.
+    temp_folder const tmp("canopy_openmesh_test");
+    tmp.write("arrow.off", "OFF\n8 2 0\n2 2 0\n1 1 0\n0 2 0\n1 0.25 0\n5 0 0\n6 0 0\n6 1 0\n5 1 0\n"
+                           "4 0 1 2 3\n4 4 5 6 7\n");
+    auto const r = canopy::read_openmesh(tmp.path / "arrow.off");
+    CHECK(r.faces == 2);
+    CHECK(r.polygons == 2);
+    CHECK(r.concave_polygons == 1);
+    REQUIRE(r.mesh.triangles.size() == 4);
+    using tri = std::array<std::uint32_t, 3>;
+    // Ear clipping starts at corner 0: (3 0 1) is an ear, then the corners left, in face order.
+    CHECK(r.mesh.triangles[0] == tri{3, 0, 1});
+    CHECK(r.mesh.triangles[1] == tri{1, 2, 3});
+    CHECK(r.mesh.triangles[2] == tri{4, 5, 6});
+    CHECK(r.mesh.triangles[3] == tri{4, 6, 7});
 }
 
 TEST_CASE("STL ASCII and binary load every facet with its corners") {

@@ -174,7 +174,7 @@ TEST_CASE("rays hit the compiled staircase where a brute-force loop over its tri
     CHECK(hits > total / 3);
 }
 
-TEST_CASE("the plugin's node type expands in compile(); its errors cross the library boundary as scene errors") {
+TEST_CASE("the plugin's node type expands in compile(), its errors cross the library boundary as scene errors") {
     auto const r = with_spiral();
     canopy::scene s;
     s.add_custom(s.root(), "spiral_staircase", {{"steps", "5"}}, "stairs");
@@ -218,7 +218,7 @@ TEST_CASE("CANOPY_PLUGIN_PATH is loaded by builtin_registry()") {
     CHECK(s.meshes().at(0).triangles.size() == 36);
 }
 
-TEST_CASE("files that are not plugins are scene errors naming the file; the registry is unchanged") {
+TEST_CASE("files that are not plugins are scene errors naming the file, the registry is unchanged") {
     temp_folder const tmp("canopy_scene_plugin_test");
     fs::path const& folder = tmp.path;
     fs::path const text = folder / "notes.so";

@@ -134,7 +134,7 @@ TEST_CASE("triangle_soup has count triangles of 3 vertices each, inside the box 
     CHECK(first_corner_in_box);
 }
 
-TEST_CASE("generators are deterministic: same parameters, same bits; another seed, other data") {
+TEST_CASE("generators are deterministic: same parameters, same bits, another seed, other data") {
     for (std::string const name : {"terrain", "triangle_soup", "billboard_forest"}) {
         CAPTURE(name);
         canopy::parameters const small = name == "terrain"         ? canopy::parameters{{"resolution", "16"}}
@@ -171,7 +171,7 @@ TEST_CASE("generators are deterministic: same parameters, same bits; another see
     CHECK(bits_of(s1.meshes()[0]) == bits_of(s2.meshes()[0]));
 }
 
-TEST_CASE("bad parameters are scene errors naming the generator and the parameter; the scene is unchanged") {
+TEST_CASE("bad parameters are scene errors naming the generator and the parameter, the scene is unchanged") {
     struct bad {
         char const* generator;
         char const* key;

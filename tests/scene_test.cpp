@@ -229,7 +229,7 @@ TEST_CASE("a single untransformed mesh is traced without a top level") {
     }
 }
 
-TEST_CASE("a transformed single mesh gets a top level; a shared mesh is built once") {
+TEST_CASE("a transformed single mesh gets a top level, a shared mesh is built once") {
     canopy::scene s;
     auto const m = s.add_mesh(sphere("ball"));
     s.add_mesh_node(s.add_transform(s.root(), translate(3, 0, 0)), m);
@@ -255,7 +255,7 @@ TEST_CASE("a transformed single mesh gets a top level; a shared mesh is built on
     check_against_brute_force(three, 400, 3);
 }
 
-TEST_CASE("instances of a multi-mesh subtree become a group at level 2; single-mesh subtrees are placed directly") {
+TEST_CASE("instances of a multi-mesh subtree become a group at level 2, single-mesh subtrees are placed directly") {
     canopy::scene s;
     auto const ball = s.add_mesh(sphere("ball"));
     auto const stone = s.add_mesh(sphere("stone", 0));

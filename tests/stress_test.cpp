@@ -814,7 +814,7 @@ TEST_CASE("scaling the direction by 2^k keeps the triangle and u, v bit for bit 
 
 // 7 ------------------------------------------------------------------------------------------------
 
-TEST_CASE("zero-area triangles are never hit, directly or through a BVH; slivers give finite t, u, v") {
+TEST_CASE("zero-area triangles are never hit, directly or through a BVH, slivers give finite t, u, v") {
     random_source rng(701);
     // Collinear vertices with exact coordinates, and repeated vertices.
     std::vector<triangle> degenerate{{{0, 0, 0}, {1, 0, 0}, {3, 0, 0}},

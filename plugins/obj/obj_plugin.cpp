@@ -136,7 +136,7 @@ struct corner {
     std::uint32_t v = absent, vt = absent, vn = absent;
 };
 
-// The faces of one material, fanned into triangles, in file order.
+// The faces of one material, as triangles (canopy.scene:polygon), in file order.
 struct bucket {
     std::string material;
     std::vector<std::array<corner, 3>> triangles;
@@ -306,7 +306,13 @@ private:
         bucket& b = buckets_[current_];
         b.any_uv = b.any_uv || face[0].vt != absent;
         b.any_normal = b.any_normal || face[0].vn != absent;
-        for (std::size_t k = 1; k + 1 < face.size(); ++k) b.triangles.push_back({face[0], face[k], face[k + 1]});
+        if (face.size() == 3) {
+            b.triangles.push_back({face[0], face[1], face[2]});
+            return;
+        }
+        points_.clear();
+        for (corner const& c : face) points_.push_back(positions_[c.v]);
+        for (auto const& t : triangulate_polygon(points_).triangles) b.triangles.push_back({face[t[0]], face[t[1]], face[t[2]]});
     }
 
     void read_libraries(std::string_view content, std::vector<std::string_view> const& tokens, std::size_t line) {
@@ -404,6 +410,7 @@ private:
     registry const* r_;
     scene& s_;
     std::vector<vec3<float>> positions_, normals_;
+    std::vector<vec3<float>> points_; // the corners of the face being triangulated
     std::vector<vec2<float>> uvs_;
     std::vector<bucket> buckets_;
     std::map<std::string, std::size_t> bucket_of_;

@@ -2,7 +2,8 @@
 //
 // Loads: `.obj` files with their `.mtl` material libraries into one group named after the file,
 // holding one mesh node per material the faces use (meshes in order of first use; triangles of a
-// mesh in file order, each polygon fanned (v0 vi vi+1) in order). A file without `usemtl` is one
+// mesh in file order; a convex polygon fanned (v0 vi vi+1) in order, a non-convex one ear-clipped,
+// see canopy.scene:polygon). A file without `usemtl` is one
 // mesh whose triangle i comes from the i-th `f` line when every face is a triangle: the benchmark
 // OBJ subset (bench/FORMATS.md) reads identically. Parameters: none.
 //

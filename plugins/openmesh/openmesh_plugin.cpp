@@ -717,6 +717,7 @@ openmesh_read_result read_openmesh(std::filesystem::path const& path) {
     result.texcoords = has_uvs;
     result.faces = faces.size();
     result.degenerate_faces = checker.stl_degenerate;
+    std::vector<vec3<float>> points; // the corners of the face being triangulated
     for (auto const& r : faces) {
         std::size_t const n = r.corners.size();
         result.polygons += n > 3;
@@ -734,11 +735,14 @@ openmesh_read_result read_openmesh(std::filesystem::path const& path) {
             if (r.normals[k]) return to_vec3(*r.normals[k]);
             return to_vec3(mesh.normal(OpenMesh::VertexHandle(r.corners[k])));
         };
-        for (std::size_t k = 1; k + 1 < n; ++k) {
-            std::array<std::size_t, 3> const corner{0, k, k + 1};
-            out.triangles.push_back({std::uint32_t(r.corners[0]), std::uint32_t(r.corners[k]), std::uint32_t(r.corners[k + 1])});
-            if (has_uvs) out.uvs.push_back({uv_at(corner[0]), uv_at(corner[1]), uv_at(corner[2])});
-            if (normals) out.normals.push_back({normal_at(corner[0]), normal_at(corner[1]), normal_at(corner[2])});
+        points.clear();
+        for (int v : r.corners) points.push_back(out.positions[std::size_t(v)]);
+        polygon_triangles const cut = triangulate_polygon(points);
+        result.concave_polygons += cut.ear_clipped;
+        for (auto const& t : cut.triangles) {
+            out.triangles.push_back({std::uint32_t(r.corners[t[0]]), std::uint32_t(r.corners[t[1]]), std::uint32_t(r.corners[t[2]])});
+            if (has_uvs) out.uvs.push_back({uv_at(t[0]), uv_at(t[1]), uv_at(t[2])});
+            if (normals) out.normals.push_back({normal_at(t[0]), normal_at(t[1]), normal_at(t[2])});
         }
     }
     return result;
@@ -756,7 +760,7 @@ node_id load_openmesh(scene& s, std::filesystem::path const& file, node_id paren
 
 void register_openmesh_plugin(registry& r) {
     for (char const* ext : {".ply", ".off", ".stl", ".om", ".obj"})
-        r.add_loader(ext, "openmesh", "triangle mesh through OpenMesh (polygons fan-triangulated)",
+        r.add_loader(ext, "openmesh", "triangle mesh through OpenMesh (polygons triangulated)",
                      [](scene& s, std::filesystem::path const& file, node_id parent, registry const&) {
                          return load_openmesh(s, file, parent);
                      });

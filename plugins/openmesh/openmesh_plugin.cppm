@@ -8,9 +8,9 @@
 // What is read:
 //   positions     every vertex of the file, in file order (no vertex is merged or split; STL is
 //                 the exception: OpenMesh's STL reader merges equal corners into one vertex)
-//   triangles     every face of the file, in file order; a face of n > 3 corners becomes the
-//                 fan (c0, c_k, c_k+1), k = 1 … n−2 (exact for convex faces, not for concave
-//                 ones); a face that repeats a vertex is kept as it is (its degenerate
+//   triangles     every face of the file, in file order; a face of n > 3 corners becomes n − 2
+//                 triangles (canopy.scene:polygon: the fan (c0, c_k, c_k+1) when convex,
+//                 ear-clipped when not); a face that repeats a vertex is kept as it is (its degenerate
 //                 triangles are never hit). STL: OpenMesh's STL reader skips a facet two of
 //                 whose corners are equal before any importer sees it; such facets (no area)
 //                 are counted here and reported in degenerate_faces
@@ -57,7 +57,8 @@ export namespace canopy {
 struct openmesh_read_result {
     mesh_data mesh;
     std::size_t faces = 0;            // faces read: all of the file's (STL: less the skipped degenerate facets)
-    std::size_t polygons = 0;         // faces of more than three corners, fan-triangulated
+    std::size_t polygons = 0;         // faces of more than three corners (canopy.scene:polygon)
+    std::size_t concave_polygons = 0; // of which non-convex, ear-clipped rather than fanned
     std::size_t degenerate_faces = 0; // faces that repeat a vertex (kept), or STL facets with equal corners (skipped)
     std::size_t nonmanifold_faces = 0; // faces OpenMesh could not connect (kept on their own vertices)
     bool vertex_normals = false;      // the file has normals (mesh.normals is filled)

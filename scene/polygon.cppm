@@ -1,0 +1,146 @@
+// canopy.scene:polygon — triangles of a loader's polygon face (OBJ, PLY, OFF, OM faces of more
+// than three corners).
+//
+// The face is looked at in the plane of its Newell normal (Newell 1972; projected by dropping the
+// normal's largest component, so the 2-D coordinates are the 3-D ones, exactly). Then:
+// - a convex face (no turn against the face's orientation) becomes the fan (c0, ck, ck+1),
+//   k = 1 … n−2, which is what loaders have always produced for convex faces;
+// - a simple non-convex face is ear-clipped (Meisters 1975, "Polygons have ears"; O(n²)): every
+//   triangle lies inside the face, and together they cover it exactly;
+// - a face that is neither (self-intersecting, all corners collinear, no ear left) is fanned from
+//   the corners not yet cut off, and reported as such; so is a non-convex face of more than
+//   max_ear_clipped_corners corners (ear clipping is quadratic to cubic in the corners, and a
+//   loader must not be made to hang by one face).
+// Every face of n corners gives n − 2 triangles with the face's winding (corner order). The turn
+// and inside tests run in double on float coordinates: each 2-D edge function is a product of
+// exact differences, rounded once.
+module;
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+export module canopy.scene:polygon;
+import canopy.math;
+
+export namespace canopy {
+
+// Non-convex faces with more corners than this are fanned, not ear-clipped.
+inline constexpr std::size_t max_ear_clipped_corners = 256;
+
+struct polygon_triangles {
+    std::vector<std::array<std::uint32_t, 3>> triangles; // indices into the face's corners
+    bool ear_clipped = false; // a non-convex face, cut into ears
+    bool fanned_fallback = false; // neither convex nor simple: fanned (may cover more than the face)
+};
+
+namespace detail {
+
+struct point2 {
+    double x, y;
+};
+
+// Twice the signed area of (a, b, c): > 0 when a → b → c turns counter-clockwise.
+inline double turn(point2 a, point2 b, point2 c) {
+    return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+}
+
+// p in the closed triangle (a, b, c) of orientation `sign` (+1 or −1).
+inline bool in_triangle(point2 p, point2 a, point2 b, point2 c, double sign) {
+    return sign * turn(a, b, p) >= 0.0 && sign * turn(b, c, p) >= 0.0 && sign * turn(c, a, p) >= 0.0;
+}
+
+inline void fan(std::span<std::uint32_t const> corners, polygon_triangles& out) {
+    for (std::size_t k = 1; k + 1 < corners.size(); ++k) out.triangles.push_back({corners[0], corners[k], corners[k + 1]});
+}
+
+} // namespace detail
+
+inline polygon_triangles triangulate_polygon(std::span<vec3<float> const> corners) {
+    using detail::point2;
+    polygon_triangles out;
+    std::size_t const n = corners.size();
+    if (n < 3) return out;
+    out.triangles.reserve(n - 2);
+    std::vector<std::uint32_t> order(n);
+    for (std::size_t k = 0; k < n; ++k) order[k] = std::uint32_t(k);
+    if (n == 3) {
+        detail::fan(order, out);
+        return out;
+    }
+
+    // Newell normal, and the plane it is most nearly perpendicular to.
+    double nx = 0.0, ny = 0.0, nz = 0.0;
+    for (std::size_t k = 0; k < n; ++k) {
+        vec3<double> const p(corners[k]), q(corners[(k + 1) % n]);
+        nx += (p.y - q.y) * (p.z + q.z);
+        ny += (p.z - q.z) * (p.x + q.x);
+        nz += (p.x - q.x) * (p.y + q.y);
+    }
+    int const drop = std::abs(nx) >= std::abs(ny) && std::abs(nx) >= std::abs(nz) ? 0 : (std::abs(ny) >= std::abs(nz) ? 1 : 2);
+    std::vector<point2> p(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        vec3<double> const c(corners[k]);
+        p[k] = drop == 0 ? point2{c.y, c.z} : drop == 1 ? point2{c.z, c.x} : point2{c.x, c.y};
+    }
+    double area = 0.0;
+    for (std::size_t k = 0; k < n; ++k) area += p[k].x * p[(k + 1) % n].y - p[(k + 1) % n].x * p[k].y;
+    if (area == 0.0) { // collinear corners: nothing to cut
+        out.fanned_fallback = true;
+        detail::fan(order, out);
+        return out;
+    }
+    double const sign = area > 0.0 ? 1.0 : -1.0;
+
+    bool convex = true;
+    for (std::size_t k = 0; k < n && convex; ++k)
+        convex = sign * detail::turn(p[(k + n - 1) % n], p[k], p[(k + 1) % n]) >= 0.0;
+    if (convex) {
+        detail::fan(order, out);
+        return out;
+    }
+
+    if (n > max_ear_clipped_corners) {
+        out.fanned_fallback = true;
+        detail::fan(order, out);
+        return out;
+    }
+
+    // Ear clipping: walk round the face and cut off a corner whose triangle turns the face's way
+    // and holds no other remaining corner, until three are left. A full round without a cut
+    // means the face is not simple.
+    out.ear_clipped = true;
+    auto const is_ear = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+        if (!(sign * detail::turn(p[a], p[b], p[c]) > 0.0)) return false;
+        for (std::uint32_t q : order) {
+            if (q == a || q == b || q == c) continue;
+            bool const shared = (p[q].x == p[a].x && p[q].y == p[a].y) || (p[q].x == p[b].x && p[q].y == p[b].y) ||
+                                (p[q].x == p[c].x && p[q].y == p[c].y);
+            if (!shared && detail::in_triangle(p[q], p[a], p[b], p[c], sign)) return false;
+        }
+        return true;
+    };
+    std::size_t i = 0, misses = 0;
+    while (order.size() > 3) {
+        std::size_t const m = order.size();
+        i %= m;
+        std::uint32_t const a = order[(i + m - 1) % m], b = order[i], c = order[(i + 1) % m];
+        if (is_ear(a, b, c)) {
+            out.triangles.push_back({a, b, c});
+            order.erase(order.begin() + std::ptrdiff_t(i));
+            i = (i + m - 2) % (m - 1); // the corner before may have become an ear
+            misses = 0;
+        } else if (++misses == m) { // not simple: fan what is left
+            out.fanned_fallback = true;
+            detail::fan(order, out);
+            return out;
+        } else {
+            ++i;
+        }
+    }
+    out.triangles.push_back({order[0], order[1], order[2]});
+    return out;
+}
+
+} // namespace canopy
