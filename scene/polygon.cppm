@@ -11,10 +11,16 @@
 //   the corners not yet cut off, and reported as such; so is a non-convex face of more than
 //   max_ear_clipped_corners corners (ear clipping is quadratic to cubic in the corners, and a
 //   loader must not be made to hang by one face).
-// Every face of n corners gives n − 2 triangles with the face's winding (corner order). The turn
-// and inside tests run in double on float coordinates: each 2-D edge function is a product of
-// exact differences, rounded once.
+// Every face of n corners gives n − 2 triangles with the face's winding (corner order). Every
+// turn (orientation) test has an exact sign: its six products of float coordinates are exact in
+// double, and their sum is kept as a nonoverlapping expansion (Shewchuk 1997, "Adaptive
+// Precision Floating-Point Arithmetic and Fast Robust Geometric Predicates"), whose largest
+// nonzero component has the sign of the exact sum. Convexity and ears are thus decided exactly,
+// in every build.
 module;
+// No a·b + c → FMA contraction: the two-sum steps below need every sum rounded on its own.
+#pragma STDC FP_CONTRACT OFF
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -41,9 +47,28 @@ struct point2 {
     double x, y;
 };
 
-// Twice the signed area of (a, b, c): > 0 when a → b → c turns counter-clockwise.
+// a + b = s + error exactly (Knuth's two-sum).
+inline void two_sum(double a, double b, double& s, double& error) {
+    s = a + b;
+    double const bb = s - a;
+    error = (a - (s - bb)) + (b - bb);
+}
+
+// Twice the signed area of (a, b, c) for float coordinates, with the exact sign (> 0 when
+// a → b → c turns counter-clockwise); the magnitude is the sum's largest expansion component.
 inline double turn(point2 a, point2 b, point2 c) {
-    return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+    // a.x·b.y − a.y·b.x + b.x·c.y − b.y·c.x + c.x·a.y − c.y·a.x: products of floats, exact.
+    double const terms[6] = {a.x * b.y, -(a.y * b.x), b.x * c.y, -(b.y * c.x), c.x * a.y, -(c.y * a.x)};
+    double e[6];
+    int m = 0;
+    for (double t : terms) { // grow the expansion e[0..m) by t
+        double q = t;
+        for (int i = 0; i < m; ++i) two_sum(q, e[i], q, e[i]);
+        e[m++] = q;
+    }
+    for (int i = m - 1; i >= 0; --i)
+        if (e[i] != 0.0) return e[i];
+    return 0.0;
 }
 
 // p in the closed triangle (a, b, c) of orientation `sign` (+1 or −1).
@@ -84,14 +109,20 @@ inline polygon_triangles triangulate_polygon(std::span<vec3<float> const> corner
         vec3<double> const c(corners[k]);
         p[k] = drop == 0 ? point2{c.y, c.z} : drop == 1 ? point2{c.z, c.x} : point2{c.x, c.y};
     }
-    double area = 0.0;
-    for (std::size_t k = 0; k < n; ++k) area += p[k].x * p[(k + 1) % n].y - p[(k + 1) % n].x * p[k].y;
-    if (area == 0.0) { // collinear corners: nothing to cut
+    // The face's orientation: the turn at its lowest-leftmost corner, which is convex in a simple
+    // face (the signed area when that turn is flat, e.g. at a repeated corner).
+    std::size_t const low = std::size_t(std::min_element(p.begin(), p.end(), [](point2 a, point2 b) {
+                                            return a.x < b.x || (a.x == b.x && a.y < b.y);
+                                        }) - p.begin());
+    double orientation = detail::turn(p[(low + n - 1) % n], p[low], p[(low + 1) % n]);
+    if (orientation == 0.0)
+        for (std::size_t k = 0; k < n; ++k) orientation += p[k].x * p[(k + 1) % n].y - p[(k + 1) % n].x * p[k].y;
+    if (orientation == 0.0) { // collinear corners: nothing to cut
         out.fanned_fallback = true;
         detail::fan(order, out);
         return out;
     }
-    double const sign = area > 0.0 ? 1.0 : -1.0;
+    double const sign = orientation > 0.0 ? 1.0 : -1.0;
 
     bool convex = true;
     for (std::size_t k = 0; k < n && convex; ++k)

@@ -2,7 +2,8 @@
 // fan exactly; every other simple face must be cut into triangles that partition it, which is
 // checked against the face itself: n − 2 triangles with the face's orientation, no triangle edge
 // crossing the boundary, no corner strictly inside a triangle, every centroid inside the face
-// (crossing number), and the areas adding up to the face's area (shoelace formula).
+// (crossing number), and the areas adding up to the face's area (shoelace formula). Corners are
+// multiples of 2^-10, so the test's own predicates are exact whatever the build's contraction.
 #include <catch2/catch.hpp>
 
 #include <algorithm>
@@ -84,16 +85,22 @@ void check_partition(std::vector<p2> const& poly, canopy::polygon_triangles cons
     CHECK(sum == Approx(std::abs(area)).epsilon(1e-12));
 }
 
-// A star-shaped polygon: n corners at increasing angles, random radii in [0.2, 1].
+// A star-shaped polygon: n corners at increasing angles, random radii in [0.2, 1], coordinates
+// multiples of 2^-10 (so that every cross product above is exact in double, in any build), and
+// no three consecutive corners on a line (drawn again until so).
 std::vector<p2> random_star(std::mt19937& rng, std::size_t n) {
     std::uniform_real_distribution<double> radius(0.2, 1.0);
-    std::vector<p2> p;
-    for (std::size_t k = 0; k < n; ++k) {
-        double const angle = 2.0 * 3.141592653589793 * double(k) / double(n);
-        double const r = radius(rng);
-        p.push_back({double(float(r * std::cos(angle))), double(float(r * std::sin(angle)))});
+    for (;;) {
+        std::vector<p2> p;
+        for (std::size_t k = 0; k < n; ++k) {
+            double const angle = 2.0 * 3.141592653589793 * double(k) / double(n);
+            double const r = radius(rng);
+            p.push_back({std::round(r * std::cos(angle) * 1024.0) / 1024.0, std::round(r * std::sin(angle) * 1024.0) / 1024.0});
+        }
+        bool flat = false;
+        for (std::size_t k = 0; k < n; ++k) flat = flat || cross(p[k], p[(k + 1) % n], p[(k + 2) % n]) == 0.0;
+        if (!flat) return p;
     }
-    return p;
 }
 
 } // namespace
