@@ -24,6 +24,7 @@ using canopy::triangle;
 using canopy::vec3;
 using float8 = canopy::simd::float8;
 using test_support::make_ray;
+using test_support::pack;
 using test_support::random_source;
 
 constexpr float inf = std::numeric_limits<float>::infinity();
@@ -485,18 +486,6 @@ TEST_CASE("double-precision triangles and rays") {
 
 namespace {
 
-// Eight scalar rays as one packet.
-canopy::basic_ray<float8> pack(std::array<ray, 8> const& rays) {
-    canopy::basic_ray<float8> p;
-    for (int i = 0; i < 8; ++i) {
-        auto const& r = rays[std::size_t(i)];
-        canopy::set_lane(p.origin, i, r.origin);
-        canopy::set_lane(p.direction, i, r.direction);
-        p.tmin.set(i, r.tmin);
-        p.tmax.set(i, r.tmax);
-    }
-    return p;
-}
 
 template <typename Packet, typename Scalar>
 void check_lane_equals_scalar(Packet const& packet, int lane, Scalar const& scalar) {

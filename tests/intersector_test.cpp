@@ -67,6 +67,7 @@ using two_level = canopy::bvh<mesh_instance>;
 using two_level_instance = canopy::instance<two_level>;
 using three_level = canopy::bvh<two_level_instance>;
 
+using test_support::checkerboard_opaque;
 using test_support::make_ray;
 using test_support::random_rays;
 using test_support::random_source;
@@ -115,11 +116,6 @@ struct overload_set : F... {
 template <typename... F>
 overload_set(F...) -> overload_set<F...>;
 
-// Procedural checkerboard alpha: transparent where floor(8u) + floor(8v) is odd.
-bool opaque(float u, float v) {
-    auto const cell = [](float x) { return static_cast<int>(std::floor(8.0f * std::fmin(std::fmax(x, 0.0f), 1.0f))); };
-    return (cell(u) + cell(v)) % 2 == 0;
-}
 
 // The same alpha mask written with and without the using-declaration.
 struct alpha_mask : canopy::basic_intersector<alpha_mask> {
@@ -128,7 +124,7 @@ struct alpha_mask : canopy::basic_intersector<alpha_mask> {
     auto operator()(Ray const& r, triangle const& tri) {
         ++calls;
         auto hr = intersect(r, tri);
-        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
         return hr;
     }
     unsigned calls = 0;
@@ -139,7 +135,7 @@ struct alpha_mask_without_using : canopy::basic_intersector<alpha_mask_without_u
     auto operator()(Ray const& r, triangle const& tri) {
         ++calls;
         auto hr = intersect(r, tri);
-        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
         return hr;
     }
     unsigned calls = 0;

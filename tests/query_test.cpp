@@ -33,7 +33,9 @@ using two_level_instance = canopy::instance<two_level>;
 using three_level = canopy::bvh<two_level_instance>;
 using record = canopy::hit_record<ray, triangle>;
 
+using test_support::checkerboard_opaque;
 using test_support::make_ray;
+using test_support::pack;
 using test_support::random_rays;
 using test_support::random_source;
 using test_support::random_transform;
@@ -131,18 +133,13 @@ void require_agreement(query_agreement const& a, int min_hits) {
     CHECK(a.multi_mismatches == 0);
 }
 
-// Procedural checkerboard alpha: transparent where floor(8u) + floor(8v) is odd (u, v clamped).
-bool opaque(float u, float v) {
-    auto const cell = [](float x) { return static_cast<int>(std::floor(8.0f * std::fmin(std::fmax(x, 0.0f), 1.0f))); };
-    return (cell(u) + cell(v)) % 2 == 0;
-}
 
 struct alpha_mask : canopy::basic_intersector<alpha_mask> {
     using canopy::basic_intersector<alpha_mask>::operator();
     template <typename Ray>
     auto operator()(Ray const& r, triangle const& tri) {
         auto hr = intersect(r, tri);
-        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
         return hr;
     }
 };
@@ -209,7 +206,7 @@ TEST_CASE("an alpha-mask intersector gives the brute-force results with the same
     mesh_bvh const b = canopy::build_binned_sah(soup);
     auto const masked_test = [](ray const& r, triangle const& tri) {
         auto hr = canopy::intersect(r, tri);
-        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
         return hr;
     };
     query_agreement agreement;
@@ -414,7 +411,7 @@ TEST_CASE("an alpha mask acts through every instance level, for all three querie
     random_source rng(204);
     auto const masked_test = [](ray const& r, triangle const& tri) {
         auto hr = canopy::intersect(r, tri);
-        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
         return hr;
     };
     query_agreement middle, top;
@@ -677,7 +674,7 @@ struct tmax_witness : canopy::basic_intersector<tmax_witness> {
         violations += !(r.tmax <= best);
         culled_calls += r.tmax < initial_tmax;
         auto hr = intersect(r, tri);
-        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
         if (hr.hit && hr.t < best) best = hr.t;
         return hr;
     }
@@ -701,7 +698,7 @@ struct stop_witness : canopy::basic_intersector<stop_witness> {
     auto operator()(Ray const& r, triangle const& tri) {
         tests_after_accept += accepted;
         auto hr = intersect(r, tri);
-        if (hr.hit) hr.hit = opaque(hr.u, hr.v);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
         accepted = accepted || hr.hit;
         ++tests;
         return hr;
@@ -771,17 +768,6 @@ TEST_CASE("any_hit stops the whole traversal at the first accepted hit, through 
 
 namespace {
 
-canopy::basic_ray<float8> pack(std::array<ray, 8> const& rays) {
-    canopy::basic_ray<float8> p;
-    for (int i = 0; i < 8; ++i) {
-        auto const& r = rays[std::size_t(i)];
-        canopy::set_lane(p.origin, i, r.origin);
-        canopy::set_lane(p.direction, i, r.direction);
-        p.tmin.set(i, r.tmin);
-        p.tmax.set(i, r.tmax);
-    }
-    return p;
-}
 
 template <typename Packet>
 bool lane_equals(Packet const& p, int lane, record const& s) {

@@ -1,6 +1,7 @@
-// Random test geometry shared by the core tests (intersector, bvh, query, stress): a seeded
-// random source, random affine transforms, triangle soups, rays into a box, and a three-level
-// instanced scene. Fixed seeds: every run tests the same cases.
+// Random test geometry shared by the core tests (geometry, intersector, bvh, query, stress): a
+// seeded random source, random affine transforms, triangle soups, rays into a box, and a
+// three-level instanced scene; also eight rays packed into one packet and the checkerboard alpha
+// mask the intersector tests use. Fixed seeds: every run tests the same cases.
 //
 // Include it after the test file's `import canopy.query;` (or `import canopy.geometry;`, for
 // what needs no BVH): it uses <array>, <cmath>, <cstdint>, <limits>, <random> and <vector>,
@@ -96,6 +97,26 @@ inline canopy::affine_transform<float> random_transform(random_source& rng, floa
         rows[std::size_t(4 * i + 3)] = rng.uniform(-translation, translation);
     }
     return canopy::affine_transform<float>::from_rows(rows);
+}
+
+// Eight scalar rays as one packet: lane i is rays[i].
+inline canopy::basic_ray<canopy::simd::float8> pack(std::array<canopy::ray, 8> const& rays) {
+    canopy::basic_ray<canopy::simd::float8> p;
+    for (int i = 0; i < 8; ++i) {
+        auto const& r = rays[std::size_t(i)];
+        canopy::set_lane(p.origin, i, r.origin);
+        canopy::set_lane(p.direction, i, r.direction);
+        p.tmin.set(i, r.tmin);
+        p.tmax.set(i, r.tmax);
+    }
+    return p;
+}
+
+// Procedural checkerboard alpha: transparent where floor(8u) + floor(8v) is odd (u, v clamped
+// to [0, 1]).
+inline bool checkerboard_opaque(float u, float v) {
+    auto const cell = [](float x) { return static_cast<int>(std::floor(8.0f * std::fmin(std::fmax(x, 0.0f), 1.0f))); };
+    return (cell(u) + cell(v)) % 2 == 0;
 }
 
 } // namespace test_support

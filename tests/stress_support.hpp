@@ -10,6 +10,7 @@
 
 namespace stress_support {
 
+using test_support::pack;
 using test_support::random_rays;
 using test_support::random_source;
 using test_support::triangle_soup;

@@ -251,17 +251,6 @@ std::vector<record> brute_force_hits(ray const& r, std::vector<triangle> const& 
     return hits;
 }
 
-packet_ray pack(std::array<ray, 8> const& rays) {
-    packet_ray p;
-    for (int i = 0; i < 8; ++i) {
-        ray const& r = rays[static_cast<std::size_t>(i)];
-        canopy::set_lane(p.origin, i, r.origin);
-        canopy::set_lane(p.direction, i, r.direction);
-        p.tmin.set(i, r.tmin);
-        p.tmax.set(i, r.tmax);
-    }
-    return p;
-}
 
 record lane_of(packet_record const& p, int i) {
     record r;
