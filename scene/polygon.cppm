@@ -9,8 +9,9 @@
 //   triangle lies inside the face, and together they cover it exactly;
 // - a face that is neither (self-intersecting, all corners collinear, no ear left) is fanned from
 //   the corners not yet cut off, and reported as such; so is a non-convex face of more than
-//   max_ear_clipped_corners corners (ear clipping is quadratic to cubic in the corners, and a
-//   loader must not be made to hang by one face).
+//   max_ear_clipped_corners corners, and one whose clipping takes more than 8 n² corner-in-ear
+//   tests (ear clipping is quadratic in the corners for ordinary faces, cubic at worst, and no
+//   face may make a loader hang).
 // Every face of n corners gives n − 2 triangles with the face's winding (corner order). Every
 // turn (orientation) test has an exact sign: its six products of float coordinates are exact in
 // double, and their sum is kept as a nonoverlapping expansion (Shewchuk 1997, "Adaptive
@@ -142,9 +143,11 @@ inline polygon_triangles triangulate_polygon(std::span<vec3<float> const> corner
     // and holds no other remaining corner, until three are left. A full round without a cut
     // means the face is not simple.
     out.ear_clipped = true;
+    std::size_t budget = 8 * n * n; // corner-in-ear tests allowed
     auto const is_ear = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
         if (!(sign * detail::turn(p[a], p[b], p[c]) > 0.0)) return false;
         for (std::uint32_t q : order) {
+            if (budget > 0) --budget;
             if (q == a || q == b || q == c) continue;
             bool const shared = (p[q].x == p[a].x && p[q].y == p[a].y) || (p[q].x == p[b].x && p[q].y == p[b].y) ||
                                 (p[q].x == p[c].x && p[q].y == p[c].y);
@@ -162,7 +165,7 @@ inline polygon_triangles triangulate_polygon(std::span<vec3<float> const> corner
             order.erase(order.begin() + std::ptrdiff_t(i));
             i = (i + m - 2) % (m - 1); // the corner before may have become an ear
             misses = 0;
-        } else if (++misses == m) { // not simple: fan what is left
+        } else if (++misses == m || budget == 0) { // not simple, or too slow: fan what is left
             out.fanned_fallback = true;
             detail::fan(order, out);
             return out;

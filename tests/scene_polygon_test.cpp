@@ -169,6 +169,19 @@ TEST_CASE("polygon: 200 random star-shaped faces of 4 to 60 corners, in tilted p
     }
 }
 
+TEST_CASE("polygon: a comb of max_ear_clipped_corners corners is ear-clipped within the work bound") {
+    // A base and 127 teeth: half of the corners are reflex.
+    std::vector<p2> comb{{0, 0}, {127, 0}};
+    for (int i = 127; i > 0; --i) {
+        comb.push_back({double(i), 3.0});
+        comb.push_back({double(i) - 0.5, 1.0});
+    }
+    REQUIRE(comb.size() == canopy::max_ear_clipped_corners);
+    auto const cut = canopy::triangulate_polygon(in_plane(comb));
+    CHECK(cut.ear_clipped);
+    check_partition(comb, cut);
+}
+
 TEST_CASE("polygon: faces that cannot be cut are fanned and reported, and large ones stay fast") {
     // A bow tie (self-intersecting): signed area 0.
     std::vector<vec3<float>> const bow{{0, 0, 0}, {1, 1, 0}, {1, 0, 0}, {0, 1, 0}};
