@@ -14,6 +14,7 @@
 import canopy.query;
 
 #include "random_support.hpp"
+#include "nested_scene.hpp"
 
 using canopy::aabb;
 using canopy::basic_triangle;
@@ -61,11 +62,12 @@ namespace {
 using canopy::ray;
 using canopy::triangle;
 using canopy::vec3;
-using mesh_bvh = canopy::bvh<triangle>;
-using mesh_instance = canopy::instance<mesh_bvh>;
-using two_level = canopy::bvh<mesh_instance>;
-using two_level_instance = canopy::instance<two_level>;
-using three_level = canopy::bvh<two_level_instance>;
+using test_support::mesh_bvh;
+using test_support::mesh_instance;
+using test_support::nested_scene;
+using test_support::three_level;
+using test_support::two_level;
+using test_support::two_level_instance;
 
 using test_support::checkerboard_opaque;
 using test_support::make_ray;
@@ -73,26 +75,6 @@ using test_support::random_rays;
 using test_support::random_source;
 using test_support::random_transform;
 using test_support::triangle_soup;
-
-// Meshes, a two-level scene (instances of two meshes) and a three-level scene (instances of it).
-struct nested_scene {
-    std::vector<mesh_bvh> meshes;
-    std::vector<mesh_instance> level1;
-    two_level middle;
-    std::vector<two_level_instance> level2;
-    three_level top;
-
-    explicit nested_scene(std::uint32_t seed) {
-        random_source rng(seed);
-        meshes.push_back(canopy::build_binned_sah(triangle_soup(rng, 150, 1.0f, 0.4f)));
-        meshes.push_back(canopy::build_binned_sah(triangle_soup(rng, 120, 1.0f, 0.4f)));
-        for (std::uint32_t k = 0; k < 8; ++k)
-            level1.emplace_back(meshes[k % 2], random_transform(rng, 4.0f), 10 + k);
-        middle = canopy::build_binned_sah(level1);
-        for (std::uint32_t k = 0; k < 3; ++k) level2.emplace_back(middle, random_transform(rng, 6.0f), 100 + k);
-        top = canopy::build_binned_sah(level2);
-    }
-};
 
 template <typename H>
 bool same_record(H const& a, H const& b) {

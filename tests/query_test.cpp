@@ -18,6 +18,7 @@
 import canopy.query;
 
 #include "random_support.hpp"
+#include "nested_scene.hpp"
 
 namespace {
 
@@ -26,11 +27,11 @@ using canopy::sphere;
 using canopy::triangle;
 using canopy::vec3;
 using float8 = canopy::simd::float8;
-using mesh_bvh = canopy::bvh<triangle>;
-using mesh_instance = canopy::instance<mesh_bvh>;
-using two_level = canopy::bvh<mesh_instance>;
-using two_level_instance = canopy::instance<two_level>;
-using three_level = canopy::bvh<two_level_instance>;
+using test_support::mesh_bvh;
+using test_support::mesh_instance;
+using test_support::three_level;
+using test_support::two_level;
+using test_support::two_level_instance;
 using record = canopy::hit_record<ray, triangle>;
 
 using test_support::checkerboard_opaque;
@@ -488,24 +489,12 @@ struct exact_world_triangle {
     std::uint32_t prim_id, geom_id, inst_id, inner_inst_id;
 };
 
-struct general_scene {
-    std::vector<std::vector<triangle>> soups;
-    std::vector<mesh_bvh> meshes;
-    std::vector<mesh_instance> level1;
-    two_level middle;
-    std::vector<two_level_instance> level2;
-    three_level top;
+// The nested scene with every triangle also in world space, exactly (long double), at level 2
+// (through the eight mesh instances) and level 3 (through the three instances of those).
+struct general_scene : test_support::nested_scene {
     std::vector<exact_world_triangle> world2, world3;
 
-    explicit general_scene(std::uint32_t seed) {
-        random_source rng(seed);
-        soups.push_back(triangle_soup(rng, 150, 1.0f, 0.4f));
-        soups.push_back(triangle_soup(rng, 120, 1.0f, 0.4f));
-        for (auto const& soup : soups) meshes.push_back(canopy::build_binned_sah(soup));
-        for (std::uint32_t k = 0; k < 8; ++k) level1.emplace_back(meshes[k % 2], random_transform(rng, 4.0f), 10 + k);
-        middle = canopy::build_binned_sah(level1);
-        for (std::uint32_t j = 0; j < 3; ++j) level2.emplace_back(middle, random_transform(rng, 6.0f), 100 + j);
-        top = canopy::build_binned_sah(level2);
+    explicit general_scene(std::uint32_t seed) : nested_scene(seed) {
         for (std::uint32_t k = 0; k < 8; ++k) {
             auto const& m = level1[k].object_to_world;
             for (triangle const& tri : soups[k % 2])
