@@ -88,13 +88,13 @@ inline polygon_triangles triangulate_polygon(std::span<vec3<float> const> corner
     polygon_triangles out;
     std::size_t const n = corners.size();
     if (n < 3) return out;
+    if (n == 3) {
+        out.triangles.push_back({0, 1, 2});
+        return out;
+    }
     out.triangles.reserve(n - 2);
     std::vector<std::uint32_t> order(n);
     for (std::size_t k = 0; k < n; ++k) order[k] = std::uint32_t(k);
-    if (n == 3) {
-        detail::fan(order, out);
-        return out;
-    }
 
     // Newell normal, and the plane it is most nearly perpendicular to.
     double nx = 0.0, ny = 0.0, nz = 0.0;

@@ -735,15 +735,21 @@ openmesh_read_result read_openmesh(std::filesystem::path const& path) {
             if (r.normals[k]) return to_vec3(*r.normals[k]);
             return to_vec3(mesh.normal(OpenMesh::VertexHandle(r.corners[k])));
         };
+        // Triangle t of the face, given by its corners' positions in the face.
+        auto const emit = [&](std::array<std::uint32_t, 3> const& t) {
+            out.triangles.push_back({std::uint32_t(r.corners[t[0]]), std::uint32_t(r.corners[t[1]]), std::uint32_t(r.corners[t[2]])});
+            if (has_uvs) out.uvs.push_back({uv_at(t[0]), uv_at(t[1]), uv_at(t[2])});
+            if (normals) out.normals.push_back({normal_at(t[0]), normal_at(t[1]), normal_at(t[2])});
+        };
+        if (n == 3) {
+            emit({0, 1, 2});
+            continue;
+        }
         points.clear();
         for (int v : r.corners) points.push_back(out.positions[std::size_t(v)]);
         polygon_triangles const cut = triangulate_polygon(points);
         result.concave_polygons += cut.ear_clipped;
-        for (auto const& t : cut.triangles) {
-            out.triangles.push_back({std::uint32_t(r.corners[t[0]]), std::uint32_t(r.corners[t[1]]), std::uint32_t(r.corners[t[2]])});
-            if (has_uvs) out.uvs.push_back({uv_at(t[0]), uv_at(t[1]), uv_at(t[2])});
-            if (normals) out.normals.push_back({normal_at(t[0]), normal_at(t[1]), normal_at(t[2])});
-        }
+        for (auto const& t : cut.triangles) emit(t);
     }
     return result;
 }
