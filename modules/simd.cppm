@@ -23,8 +23,10 @@ module;
 #include <concepts>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <string_view>
 #include <type_traits>
+#include <vector>
 
 #if !defined(CANOPY_SIMD_FORCE_SCALAR) && defined(__SSE4_2__)
 #include <immintrin.h>
@@ -1529,4 +1531,27 @@ CANOPY_SIMD_INLINE basic_simd<float, N> as_float(basic_simd<std::int32_t, N> x) 
   return basic_simd<float, N>(detail::backend<std::int32_t, N>::as_float(x.native()));
 }
 
+}  // namespace canopy::simd
+
+// The instruction set the library was compiled for, and whether this CPU runs it. Defined in
+// modules/isa/isa.cpp, compiled for the baseline x86-64 ISA: an application may call them first
+// thing in main() on any x86-64 CPU (the project's own programs link canopy_cpu_guard, which does
+// it before main). Feature names are those of the compilers' -m flags (avx2, avx512vl, ...).
+export namespace canopy::simd {
+extern "C++" {
+
+// The ISA's name as the configure probe recorded it: a CPU name (znver5) or x86-64-vN.
+std::string_view build_isa() noexcept;
+// The flags the library and its importers are compiled with, e.g. "-march=x86-64-v3".
+std::string_view build_isa_flags() noexcept;
+// The features of that ISA that a CPU must have.
+std::vector<std::string_view> build_isa_features();
+// The features this CPU and operating system provide (cpuid, and xgetbv for AVX/AVX-512 state).
+std::vector<std::string_view> cpu_features();
+// The features of build_isa_features() missing from `cpu` (a list like cpu_features()).
+std::vector<std::string_view> missing_isa_features(std::span<std::string_view const> cpu);
+// Whether this CPU provides every feature of build_isa_features().
+bool cpu_supports_build_isa() noexcept;
+
+}  // extern "C++"
 }  // namespace canopy::simd

@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # Installs the release build into build/install and builds examples/consumer — a project outside
-# the tree that does find_package(canopy) and `import canopy;` — against it, then runs it.
+# the tree that does find_package(canopy) and `import canopy;` — against it, then runs it. Checks
+# that the installed package records a concrete ISA (never 'native'), that the consumer's
+# configure states it, that the consumer was compiled with exactly the recorded flags, and that
+# the consumer's compile-time features match the package's (the program checks that itself).
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 "$here/setup.sh"
@@ -10,8 +13,23 @@ cmake --preset release >/dev/null
 cmake --build --preset release
 rm -rf build/install build/consumer
 cmake --install build/release --prefix build/install >/dev/null
-cmake -S examples/consumer -B build/consumer -G Ninja -DCMAKE_CXX_COMPILER=clang++-19 -DCMAKE_BUILD_TYPE=Release \
-      -DCMAKE_PREFIX_PATH="$canopy_root/build/install" >/dev/null
+
+config=build/install/lib/cmake/canopy/canopyConfig.cmake
+isa=$(sed -n 's/^set(canopy_ISA "\(.*\)")$/\1/p' "$config")
+flags=$(sed -n 's/^set(canopy_ISA_FLAGS "\(.*\)")$/\1/p' "$config" | tr ';' ' ')
+if [ -z "$isa" ] || [ -z "$flags" ] || grep -q 'native' <<<"$isa $flags"; then
+  echo "consumer: the installed package records no concrete ISA (canopy_ISA='$isa', flags '$flags')" >&2
+  exit 1
+fi
+
+configure_log=$(cmake -S examples/consumer -B build/consumer -G Ninja -DCMAKE_CXX_COMPILER="${CXX:-clang++-19}" \
+      -DCMAKE_BUILD_TYPE=Release \
+      -DCMAKE_EXPORT_COMPILE_COMMANDS=ON -DCMAKE_PREFIX_PATH="$canopy_root/build/install")
+grep -F "canopy 0.1.0: built for the x86-64 ISA $isa ($flags)" <<<"$configure_log" >&2 || {
+  echo "consumer: configure did not state the package's ISA $isa:" >&2; echo "$configure_log" >&2; exit 1; }
 cmake --build build/consumer
+# The consumer's own source is compiled with the recorded flags, in order.
+grep -F "main.cpp" build/consumer/compile_commands.json | grep -qF -- "$flags" || {
+  echo "consumer: main.cpp was not compiled with the recorded ISA flags '$flags'" >&2; exit 1; }
 ./build/consumer/consumer
-echo "consumer: built against the installed package and ran"
+echo "consumer: built against the installed package (ISA $isa) and ran"
