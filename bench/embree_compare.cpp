@@ -1,26 +1,54 @@
-// embree_compare — Canopy and Embree 3 side by side on the same scenes and rays.
+// embree_compare — Canopy and Embree 3 side by side: the same scenes, the same rays, one run.
 //
-//   canopy_bench_embree [--scene FILE.obj|FILE.inst] [--threads-list 1,2] [--repeat N]
+//   canopy_bench_embree [--scenes sphere,terrain,soup,forest,engine,bunny,slivers]
+//                       [--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2]
 //                       [--rays primary,random,shadow]
 //
-// Without --scene it generates two scenes: a closed icosphere (327,680 triangles) and a
-// two-level scene (64 instances of a 20,480-triangle icosphere). For each: build time and
-// memory, then closest-hit and any-hit Mrays/s for primary, random and shadow rays, with no
-// intersector and with the alpha rule of the bench formats (Embree: an intersection filter
-// function), at each thread count. Every figure is printed with the ratio Canopy / Embree
-// (> 1: Canopy faster or larger). Results are also compared ray by ray (hit/miss agreement).
+// Scenes (canopy.bench_scenes, bench/bench_scenes.cppm): a 1.3M-triangle icosphere, a 2M-triangle
+// terrain, a 500k triangle soup, a forest of 10,000 instances of a 51k-triangle tree, two real
+// models (the glTF engine of assimp's examples, glmark2's bunny; skipped with a note when the
+// file is missing) and a scene of thin triangles. --scenes picks some; --quick shrinks every
+// generated scene about 16× for smoke tests; --scene traces one file of the bench formats
+// (canopy.bench_formats) instead.
+//
+// Rays per scene: primary (a 512 × 512 pinhole camera), random (origins in the scene's box,
+// random directions) and shadow (from the primary hits toward a light; any hit only). Each set is
+// traced closest hit and any hit, with every Canopy intersector of `intersector_variants` below:
+// none, and the alpha rule of the bench formats (Embree: an intersection filter function).
+//
+// Timing: for each scene, thread count, ray set, query and intersector, --rounds interleaved
+// rounds (default 5); a round times Canopy then Embree over the whole ray set (the order swapped
+// every other round) with tbb::parallel_for under tbb::global_control(threads). Reported: the
+// median and the best Mrays/s of each library and the ratios Canopy / Embree of the medians (the
+// main figure) and of the bests. Build time is measured the same way (ratio > 1: Canopy slower);
+// memory per stored triangle: canopy::compute_stats(bvh).bytes summed over the BVHs against
+// Embree's device memory monitor.
+//
+// Work counts (untimed, one thread, once per scene, ray set, query and intersector): Canopy's
+// ray/box and ray/triangle tests per ray, through a counting intersector. Agreement: the rays
+// whose hit/miss differs between the libraries, and for closest hits the rays both hit whose
+// (instance, primitive) differs (informational: ties and near-ties may go either way).
+//
+// Output: Markdown, one table per scene.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
-#include <cstring>
+#include <cstdlib>
+#include <exception>
 #include <filesystem>
-#include <functional>
+#include <fstream>
 #include <limits>
+#include <map>
 #include <memory>
+#include <optional>
 #include <random>
 #include <string>
+#include <string_view>
+#include <tuple>
+#include <utility>
 #include <vector>
 #include <embree3/rtcore.h>
 #include <fmt/core.h>
@@ -29,18 +57,14 @@
 #include <tbb/parallel_for.h>
 import canopy;
 import canopy.bench_formats;
-import canopy.procedural;
+import canopy.bench_scenes;
 
 namespace {
 
+using canopy::bench::bench_scene;
 using clock_type = std::chrono::steady_clock;
-double seconds_since(clock_type::time_point t) { return std::chrono::duration<double>(clock_type::now() - t).count(); }
 
-struct scene_input {
-    std::string name;
-    std::vector<canopy::triangle> mesh;
-    std::vector<canopy::affine_transform<float>> instances; // empty: single level
-};
+double seconds_since(clock_type::time_point t) { return std::chrono::duration<double>(clock_type::now() - t).count(); }
 
 // ---- Canopy -------------------------------------------------------------------------------
 
@@ -52,7 +76,7 @@ struct canopy_scene {
     std::size_t bytes = 0;
 };
 
-std::unique_ptr<canopy_scene> build_canopy(scene_input const& in) {
+std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in) {
     auto s = std::make_unique<canopy_scene>();
     s->mesh = canopy::build_binned_sah(in.mesh);
     s->bytes = canopy::compute_stats(s->mesh).bytes;
@@ -77,6 +101,47 @@ canopy::bench_hit canopy_trace(canopy_scene const& s, canopy::ray const& r, bool
     return {hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v};
 }
 
+// Counts the tests a query makes through `Inner` (whose triangle test it calls). Its box hook is
+// called once per box instead of the 8-wide SIMD test, so it is never timed.
+template <typename Inner>
+struct counting_intersector : canopy::basic_intersector<counting_intersector<Inner>> {
+    using canopy::basic_intersector<counting_intersector<Inner>>::operator();
+
+    template <typename Ray, typename... Args>
+    auto operator()(Ray const& ray, canopy::aabb const& box, Args&&... args) {
+        ++boxes;
+        return intersect(ray, box, std::forward<Args>(args)...);
+    }
+
+    template <typename Ray>
+    auto operator()(Ray const& ray, canopy::triangle const& tri) {
+        ++triangles;
+        return canopy::test_primitive(inner, ray, tri);
+    }
+
+    Inner inner;
+    std::uint64_t boxes = 0;
+    std::uint64_t triangles = 0;
+};
+
+// ---- the intersectors compared --------------------------------------------------------------
+
+// A Canopy intersector measured against Embree: the suffix of its figures' names, and whether it
+// applies the alpha rule (Embree then runs with the alpha filter function).
+template <typename Isect>
+struct intersector_variant {
+    using type = Isect;
+    char const* suffix;
+    bool alpha_rule;
+};
+
+// Every variant is measured on every ray set and query. Another Canopy intersector for the alpha
+// rule is one more line here.
+constexpr auto intersector_variants = std::tuple{
+    intersector_variant<canopy::default_intersector>{"", false},
+    intersector_variant<canopy::bench_alpha_intersector>{" + alpha", true},
+};
+
 // ---- Embree -------------------------------------------------------------------------------
 
 std::atomic<long long> embree_bytes{0};
@@ -96,10 +161,12 @@ void alpha_filter(RTCFilterFunctionNArguments const* args) {
 }
 
 struct embree_scene {
-    RTCDevice device = nullptr;
     RTCScene mesh = nullptr;
     RTCScene top = nullptr;
     bool instanced = false;
+    embree_scene() = default;
+    embree_scene(embree_scene const&) = delete;
+    embree_scene& operator=(embree_scene const&) = delete;
     ~embree_scene() {
         if (top) rtcReleaseScene(top);
         if (mesh) rtcReleaseScene(mesh);
@@ -107,23 +174,20 @@ struct embree_scene {
     RTCScene root() const { return instanced ? top : mesh; }
 };
 
-std::unique_ptr<embree_scene> build_embree(RTCDevice device, scene_input const& in, bool alpha) {
-    auto s = std::make_unique<embree_scene>();
-    s->device = device;
-    s->mesh = rtcNewScene(device);
+// The mesh as an unindexed triangle geometry: triangle i is primitive i, as in Canopy.
+RTCGeometry embree_triangles(RTCDevice device, std::vector<canopy::triangle> const& mesh, bool alpha) {
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                          3 * sizeof(float), 3 * in.mesh.size()));
+                                                          3 * sizeof(float), 3 * mesh.size()));
     auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                               3 * sizeof(unsigned), in.mesh.size()));
-    for (std::size_t i = 0; i < in.mesh.size(); ++i) {
-        auto const& t = in.mesh[i];
-        canopy::vec3<float> const p[3] = {t.v0, t.v1, t.v2};
-        for (int k = 0; k < 3; ++k) {
-            v[9 * i + 3 * std::size_t(k) + 0] = p[k].x;
-            v[9 * i + 3 * std::size_t(k) + 1] = p[k].y;
-            v[9 * i + 3 * std::size_t(k) + 2] = p[k].z;
-            idx[3 * i + std::size_t(k)] = unsigned(3 * i + std::size_t(k));
+                                                               3 * sizeof(unsigned), mesh.size()));
+    for (std::size_t i = 0; i < mesh.size(); ++i) {
+        canopy::vec3<float> const p[3] = {mesh[i].v0, mesh[i].v1, mesh[i].v2};
+        for (std::size_t k = 0; k < 3; ++k) {
+            v[9 * i + 3 * k + 0] = p[k].x;
+            v[9 * i + 3 * k + 1] = p[k].y;
+            v[9 * i + 3 * k + 2] = p[k].z;
+            idx[3 * i + k] = unsigned(3 * i + k);
         }
     }
     if (alpha) {
@@ -131,21 +195,34 @@ std::unique_ptr<embree_scene> build_embree(RTCDevice device, scene_input const& 
         rtcSetGeometryOccludedFilterFunction(geom, alpha_filter);
     }
     rtcCommitGeometry(geom);
+    return geom;
+}
+
+RTCGeometry embree_instance(RTCDevice device, RTCScene mesh, canopy::affine_transform<float> const& m) {
+    RTCGeometry inst = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(inst, mesh);
+    // Embree's FLOAT3X4_ROW_MAJOR: three rows of (linear | translation).
+    float const rows[12] = {m.linear.col0.x, m.linear.col1.x, m.linear.col2.x, m.translation.x,
+                            m.linear.col0.y, m.linear.col1.y, m.linear.col2.y, m.translation.y,
+                            m.linear.col0.z, m.linear.col1.z, m.linear.col2.z, m.translation.z};
+    rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, rows);
+    rtcCommitGeometry(inst);
+    return inst;
+}
+
+std::unique_ptr<embree_scene> build_embree(RTCDevice device, bench_scene const& in, bool alpha) {
+    auto s = std::make_unique<embree_scene>();
+    s->mesh = rtcNewScene(device);
+    RTCGeometry geom = embree_triangles(device, in.mesh, alpha);
     rtcAttachGeometry(s->mesh, geom);
     rtcReleaseGeometry(geom);
     rtcCommitScene(s->mesh);
     if (!in.instances.empty()) {
         s->instanced = true;
         s->top = rtcNewScene(device);
+        // Instance k is attached k-th: its geometry id is k, as Canopy's inst_id.
         for (auto const& m : in.instances) {
-            RTCGeometry inst = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
-            rtcSetGeometryInstancedScene(inst, s->mesh);
-            float rows[12] = {m.linear.col0.x, m.linear.col1.x, m.linear.col2.x, m.translation.x,
-                              m.linear.col0.y, m.linear.col1.y, m.linear.col2.y, m.translation.y,
-                              m.linear.col0.z, m.linear.col1.z, m.linear.col2.z, m.translation.z};
-            // Embree's FLOAT3X4_ROW_MAJOR: three rows of (linear | translation).
-            rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, rows);
-            rtcCommitGeometry(inst);
+            RTCGeometry inst = embree_instance(device, s->mesh, m);
             rtcAttachGeometry(s->top, inst);
             rtcReleaseGeometry(inst);
         }
@@ -225,156 +302,329 @@ std::vector<ray_set> make_rays(canopy_scene const& s, canopy::aabb const& box) {
     return sets;
 }
 
-// Runs f(i) for every ray, repeat times; returns the best Mrays/s.
-double measure(std::size_t n, int repeat, std::function<void(std::size_t, std::size_t)> const& f) {
-    double best = 0.0;
-    for (int k = 0; k < repeat; ++k) {
-        auto const start = clock_type::now();
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024),
-                          [&](auto const& r) { f(r.begin(), r.end()); });
-        best = std::max(best, double(n) / seconds_since(start) * 1e-6);
-    }
-    return best;
+// ---- measuring ----------------------------------------------------------------------------
+
+// One pass of trace_range(lo, hi) over n rays on the threads allowed; returns Mrays/s.
+template <typename F>
+double trace_rate(std::size_t n, F const& trace_range) {
+    auto const start = clock_type::now();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024),
+                      [&](auto const& r) { trace_range(r.begin(), r.end()); });
+    return double(n) / seconds_since(start) * 1e-6;
 }
 
-// Comma-separated list → items.
-std::vector<std::string> split_list(char const* text) {
-    std::vector<std::string> items;
-    std::string item;
-    for (char const* p = text;; ++p) {
-        if (*p == ',' || *p == '\0') {
-            if (!item.empty()) items.push_back(item);
-            item.clear();
-            if (*p == '\0') break;
+struct samples {
+    std::vector<double> canopy, embree;
+};
+
+// `rounds` rounds of one Canopy and one Embree measurement; every other round Embree goes first,
+// so that neither always runs on the warmer caches (or the cooler CPU).
+template <typename C, typename E>
+samples interleaved_rounds(int rounds, C&& canopy_once, E&& embree_once) {
+    samples s;
+    for (int k = 0; k < rounds; ++k) {
+        if (k % 2 == 0) {
+            s.canopy.push_back(canopy_once());
+            s.embree.push_back(embree_once());
         } else {
-            item += *p;
+            s.embree.push_back(embree_once());
+            s.canopy.push_back(canopy_once());
         }
     }
-    return items;
+    return s;
 }
 
-void run_scene(scene_input const& in, std::vector<int> const& thread_counts, int repeat,
-               std::vector<std::string> const& ray_sets) {
-    fmt::print("\n## {} ({} triangles{})\n\n", in.name, in.mesh.size(),
-               in.instances.empty() ? "" : fmt::format(", {} instances", in.instances.size()));
-    fmt::print("| threads | figure | Canopy | Embree | Canopy/Embree |\n|---|---|---|---|---|\n");
-    for (int threads : thread_counts) {
+struct summary {
+    double median = 0.0;
+    double best = 0.0;
+};
+
+// Best: the largest value (rates) or the smallest (times).
+summary summarize(std::vector<double> v, bool larger_is_better) {
+    std::sort(v.begin(), v.end());
+    std::size_t const n = v.size();
+    double const median = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+    return {median, larger_is_better ? v.back() : v.front()};
+}
+
+struct work_counts {
+    double boxes_per_ray = 0.0;
+    double triangles_per_ray = 0.0;
+};
+
+template <typename Isect>
+work_counts count_work(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest) {
+    counting_intersector<Isect> counter;
+    for (auto const& r : rays) canopy_trace(s, r, closest, counter);
+    double const n = double(std::max<std::size_t>(rays.size(), 1));
+    return {double(counter.boxes) / n, double(counter.triangles) / n};
+}
+
+// "hit/miss" differences, and for closest hits also "/ (instance, prim)" differences.
+std::string disagreements(std::vector<canopy::bench_hit> const& a, std::vector<canopy::bench_hit> const& b,
+                          bool closest) {
+    std::size_t hit_miss = 0, which = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+        bool const ha = a[i].prim != canopy::invalid_id, hb = b[i].prim != canopy::invalid_id;
+        hit_miss += ha != hb;
+        which += closest && ha && hb && (a[i].prim != b[i].prim || a[i].inst != b[i].inst);
+    }
+    return closest ? fmt::format("{} / {}", hit_miss, which) : fmt::format("{}", hit_miss);
+}
+
+// ---- the table ------------------------------------------------------------------------------
+
+void print_table_header() {
+    fmt::print("| threads | figure | Canopy median | Embree median | Canopy/Embree (medians) | Canopy best | "
+               "Embree best | Canopy/Embree (bests) | box tests/ray | triangle tests/ray | disagreements |\n");
+    fmt::print("|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|\n");
+}
+
+struct row_extras {
+    std::string boxes = "–";
+    std::string triangles = "–";
+    std::string disagreements = "–";
+};
+
+void print_row(std::string_view threads, std::string_view figure, summary c, summary e, int precision,
+               row_extras const& x = {}) {
+    fmt::print("| {} | {} | {:.{}f} | {:.{}f} | **{:.2f}** | {:.{}f} | {:.{}f} | {:.2f} | {} | {} | {} |\n", threads,
+               figure, c.median, precision, e.median, precision, c.median / e.median, c.best, precision, e.best,
+               precision, c.best / e.best, x.boxes, x.triangles, x.disagreements);
+    std::fflush(stdout);
+}
+
+// ---- one scene ------------------------------------------------------------------------------
+
+struct settings {
+    std::vector<std::string> scenes = canopy::bench::bench_scene_names();
+    std::string scene_file;
+    std::vector<int> threads{1, 2};
+    int rounds = 5;
+    bool quick = false;
+    std::vector<std::string> ray_sets{"primary", "random", "shadow"};
+};
+
+// What the figures of one thread count trace.
+struct traced_scene {
+    int threads;
+    int rounds;
+    canopy_scene const& canopy;
+    embree_scene const& embree_plain;
+    embree_scene const& embree_alpha;
+};
+
+// Work counts per figure: the same at every thread count, so counted once.
+using work_cache = std::map<std::string, work_counts>;
+
+template <typename Variant>
+void measure_figure(traced_scene const& s, ray_set const& set, bool closest, Variant const& variant,
+                    work_cache& work) {
+    using isect_type = typename Variant::type;
+    std::string const figure = fmt::format("{} {}{}", set.name, closest ? "closest" : "any", variant.suffix);
+    std::size_t const n = set.rays.size();
+    std::vector<canopy::bench_hit> a(n), b(n);
+    embree_scene const& e = variant.alpha_rule ? s.embree_alpha : s.embree_plain;
+    auto const canopy_once = [&] {
+        return trace_rate(n, [&](std::size_t lo, std::size_t hi) {
+            isect_type isect;
+            for (std::size_t i = lo; i < hi; ++i) a[i] = canopy_trace(s.canopy, set.rays[i], closest, isect);
+        });
+    };
+    auto const embree_once = [&] {
+        return trace_rate(n, [&](std::size_t lo, std::size_t hi) {
+            for (std::size_t i = lo; i < hi; ++i) b[i] = embree_trace(e, set.rays[i], closest);
+        });
+    };
+    samples const rates = interleaved_rounds(s.rounds, canopy_once, embree_once);
+    auto [it, fresh] = work.try_emplace(figure);
+    if (fresh) it->second = count_work<isect_type>(s.canopy, set.rays, closest);
+    row_extras const x{fmt::format("{:.1f}", it->second.boxes_per_ray),
+                       fmt::format("{:.2f}", it->second.triangles_per_ray), disagreements(a, b, closest)};
+    print_row(fmt::format("{}", s.threads), figure + " (Mrays/s)", summarize(rates.canopy, true),
+              summarize(rates.embree, true), 2, x);
+}
+
+void measure_rays(traced_scene const& s, std::vector<ray_set> const& sets, std::vector<std::string> const& wanted,
+                  work_cache& work) {
+    for (auto const& set : sets) {
+        if (set.rays.empty() || std::find(wanted.begin(), wanted.end(), set.name) == wanted.end()) continue;
+        for (bool closest : {true, false}) {
+            if (set.shadow && closest) continue;
+            std::apply([&](auto const&... variant) { (measure_figure(s, set, closest, variant, work), ...); },
+                       intersector_variants);
+        }
+    }
+}
+
+std::string describe(bench_scene const& in) {
+    if (in.instances.empty()) return fmt::format("{}, {} triangles", in.description, in.mesh.size());
+    return fmt::format("{}, {} triangles × {} instances = {} placed", in.description, in.mesh.size(),
+                       in.instances.size(), in.mesh.size() * in.instances.size());
+}
+
+// Below the table: how many rays each set holds (shadow: one per primary hit).
+void print_ray_counts(std::vector<ray_set> const& sets) {
+    std::string line = "\nRays:";
+    for (auto const& set : sets) line += fmt::format(" {} {}{}", set.name, set.rays.size(), &set == &sets.back() ? "." : ",");
+    fmt::print("{}\n", line);
+}
+
+void run_scene(bench_scene const& in, settings const& opt) {
+    fmt::print("\n## {} ({})\n\n", in.name, describe(in));
+    print_table_header();
+    std::vector<ray_set> sets; // made once, from the first scene built (the same at every thread count)
+    work_cache work;
+    for (int threads : opt.threads) {
         tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
         RTCDevice device = rtcNewDevice(fmt::format("threads={}", threads).c_str());
         rtcSetDeviceMemoryMonitorFunction(device, memory_monitor, nullptr);
 
-        double canopy_build = 1e30, embree_build = 1e30;
+        // Build: interleaved rounds as for the rays; the scenes of the last round are traced.
         std::unique_ptr<canopy_scene> cs;
-        std::unique_ptr<embree_scene> es, es_alpha;
-        for (int k = 0; k < repeat; ++k) {
-            auto t = clock_type::now();
+        std::unique_ptr<embree_scene> es;
+        long long embree_memory = 0;
+        auto const canopy_build = [&] {
+            cs.reset();
+            auto const t = clock_type::now();
             cs = build_canopy(in);
-            canopy_build = std::min(canopy_build, seconds_since(t));
+            return seconds_since(t) * 1e3;
+        };
+        auto const embree_build = [&] {
             es.reset();
             embree_bytes = 0;
-            t = clock_type::now();
+            auto const t = clock_type::now();
             es = build_embree(device, in, false);
-            embree_build = std::min(embree_build, seconds_since(t));
+            double const ms = seconds_since(t) * 1e3;
+            embree_memory = embree_bytes.load();
+            return ms;
+        };
+        // One untimed build each first: the first pays for the allocator's and the threads' start-up.
+        canopy_build();
+        embree_build();
+        samples const builds = interleaved_rounds(opt.rounds, canopy_build, embree_build);
+        std::unique_ptr<embree_scene> es_alpha = build_embree(device, in, true);
+        if (sets.empty()) {
+            double const triangles = double(in.mesh.size());
+            print_row("–", "memory (bytes/triangle stored)", {double(cs->bytes) / triangles, double(cs->bytes) / triangles},
+                      {double(embree_memory) / triangles, double(embree_memory) / triangles}, 1);
+            sets = make_rays(*cs, cs->instanced ? cs->top.bounds() : cs->mesh.bounds());
         }
-        long long const embree_memory = embree_bytes.load();
-        es_alpha = build_embree(device, in, true);
-        fmt::print("| {} | build (ms) | {:.1f} | {:.1f} | {:.2f} (time) |\n", threads, canopy_build * 1e3,
-                   embree_build * 1e3, canopy_build / embree_build);
-        fmt::print("| {} | memory (bytes/triangle) | {:.1f} | {:.1f} | {:.2f} |\n", threads,
-                   double(cs->bytes) / double(in.mesh.size()), double(embree_memory) / double(in.mesh.size()),
-                   double(cs->bytes) / double(embree_memory));
+        print_row(fmt::format("{}", threads), "build (ms; ratio > 1: Canopy slower)", summarize(builds.canopy, false),
+                  summarize(builds.embree, false), 1);
 
-        canopy::aabb const box = cs->instanced ? cs->top.bounds() : cs->mesh.bounds();
-        auto const sets = make_rays(*cs, box);
-        for (auto const& set : sets) {
-            if (std::find(ray_sets.begin(), ray_sets.end(), set.name) == ray_sets.end()) continue;
-            for (bool closest : {true, false}) {
-                if (set.shadow && closest) continue;
-                for (bool alpha : {false, true}) {
-                    std::vector<canopy::bench_hit> a(set.rays.size()), b(set.rays.size());
-                    double const mc = measure(set.rays.size(), repeat, [&](std::size_t lo, std::size_t hi) {
-                        canopy::default_intersector none;
-                        canopy::bench_alpha_intersector mask;
-                        for (std::size_t i = lo; i < hi; ++i)
-                            a[i] = alpha ? canopy_trace(*cs, set.rays[i], closest, mask)
-                                         : canopy_trace(*cs, set.rays[i], closest, none);
-                    });
-                    embree_scene const& e = alpha ? *es_alpha : *es;
-                    double const me = measure(set.rays.size(), repeat, [&](std::size_t lo, std::size_t hi) {
-                        for (std::size_t i = lo; i < hi; ++i) b[i] = embree_trace(e, set.rays[i], closest);
-                    });
-                    std::size_t disagree = 0;
-                    for (std::size_t i = 0; i < a.size(); ++i)
-                        disagree += (a[i].prim == canopy::invalid_id) != (b[i].prim == canopy::invalid_id);
-                    fmt::print("| {} | {} {}{} (Mrays/s; {} of {} rays differ in hit/miss) | {:.2f} | {:.2f} | {:.2f} |\n",
-                               threads, set.name, closest ? "closest" : "any", alpha ? " + alpha" : "", disagree,
-                               set.rays.size(), mc, me, mc / me);
-                }
-            }
-        }
+        measure_rays({threads, opt.rounds, *cs, *es, *es_alpha}, sets, opt.ray_sets, work);
         es.reset();
         es_alpha.reset();
         rtcReleaseDevice(device);
     }
+    print_ray_counts(sets);
+}
+
+// ---- command line -------------------------------------------------------------------------
+
+// Comma-separated list → items.
+std::vector<std::string> split_list(std::string_view text) {
+    std::vector<std::string> items;
+    std::size_t start = 0;
+    while (start <= text.size()) {
+        std::size_t const end = std::min(text.find(',', start), text.size());
+        if (end > start) items.emplace_back(text.substr(start, end - start));
+        start = end + 1;
+    }
+    return items;
+}
+
+bool is_one_of(std::string const& item, std::vector<std::string> const& allowed) {
+    return std::find(allowed.begin(), allowed.end(), item) != allowed.end();
+}
+
+std::optional<settings> parse_command_line(int argc, char** argv) {
+    settings opt;
+    for (int i = 1; i < argc; ++i) {
+        std::string const name = argv[i];
+        if (name == "--quick") {
+            opt.quick = true;
+            continue;
+        }
+        if (i + 1 == argc) return std::nullopt;
+        char const* value = argv[++i];
+        if (name == "--scene") opt.scene_file = value;
+        else if (name == "--scenes") opt.scenes = split_list(value);
+        else if (name == "--rounds") opt.rounds = std::max(1, std::atoi(value));
+        else if (name == "--rays") opt.ray_sets = split_list(value);
+        else if (name == "--threads-list") {
+            opt.threads.clear();
+            for (auto const& t : split_list(value)) opt.threads.push_back(std::max(1, std::atoi(t.c_str())));
+        } else {
+            return std::nullopt;
+        }
+    }
+    for (auto const& r : opt.ray_sets)
+        if (!is_one_of(r, {"primary", "random", "shadow"})) return std::nullopt;
+    for (auto const& s : opt.scenes)
+        if (!is_one_of(s, canopy::bench::bench_scene_names())) return std::nullopt;
+    if (opt.threads.empty()) return std::nullopt;
+    return opt;
+}
+
+bench_scene load_scene_file(std::filesystem::path const& p) {
+    if (p.extension() == ".inst") {
+        auto inst = canopy::read_bench_inst(p);
+        return {p.filename().string(), "file", std::move(inst.mesh.triangles), std::move(inst.instances), {}};
+    }
+    return {p.filename().string(), "file", canopy::read_bench_obj(p).triangles, {}, {}};
+}
+
+std::string cpu_model() {
+    std::ifstream in("/proc/cpuinfo");
+    for (std::string line; std::getline(in, line);) {
+        if (line.rfind("model name", 0) != 0) continue;
+        std::size_t const start = line.find_first_not_of(" \t", line.find(':') + 1);
+        return start == std::string::npos ? "unknown" : line.substr(start);
+    }
+    return "unknown";
+}
+
+void print_header(settings const& opt) {
+    fmt::print("# Canopy vs Embree {}.{}.{}: same scenes, same rays\n\n", RTC_VERSION_MAJOR, RTC_VERSION_MINOR,
+               RTC_VERSION_PATCH);
+    fmt::print("Median and best of {} interleaved rounds{}. CPU: {}. Canopy ISA: {}.\n\n", opt.rounds,
+               opt.quick ? " (--quick: scenes shrunk about 16×)" : "", cpu_model(), canopy::simd::build_isa());
+    fmt::print("Rays in Mrays/s (ratio > 1: Canopy faster); build in ms (ratio > 1: Canopy slower); memory in bytes "
+               "per stored triangle. Ratios Canopy / Embree; the ratio of medians (bold) is the main figure. Work "
+               "counts: Canopy's tests per ray. Disagreements: rays whose hit/miss differs (closest: / rays both "
+               "hit whose instance or primitive differs).\n");
 }
 
 } // namespace
 
 int main(int argc, char** argv) {
-    std::vector<int> threads{1, 2};
-    int repeat = 3;
-    std::string scene_path;
-    std::vector<std::string> ray_sets{"primary", "random", "shadow"};
-    bool usage = false;
-    for (int i = 1; i < argc; i += 2) {
-        if (i + 1 == argc) {
-            usage = true;
-            break;
-        }
-        std::string const name = argv[i];
-        if (name == "--scene") scene_path = argv[i + 1];
-        else if (name == "--repeat") repeat = std::max(1, std::atoi(argv[i + 1]));
-        else if (name == "--rays") ray_sets = split_list(argv[i + 1]);
-        else if (name == "--threads-list") {
-            threads.clear();
-            for (char const* p = argv[i + 1]; *p;) {
-                threads.push_back(std::max(1, std::atoi(p)));
-                while (*p && *p != ',') ++p;
-                if (*p) ++p;
-            }
-        } else {
-            usage = true;
-        }
-    }
-    for (auto const& r : ray_sets)
-        if (r != "primary" && r != "random" && r != "shadow") usage = true;
-    if (usage) {
+    std::optional<settings> const opt = parse_command_line(argc, argv);
+    if (!opt) {
         std::fprintf(stderr,
-                     "usage: %s [--scene FILE.obj|FILE.inst] [--threads-list 1,2] [--repeat N] "
+                     "usage: %s [--scenes sphere,terrain,soup,forest,engine,bunny,slivers] "
+                     "[--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2] "
                      "[--rays primary,random,shadow]\n",
                      argv[0]);
         return 2;
     }
-    std::vector<scene_input> scenes;
-    if (!scene_path.empty()) {
-        std::filesystem::path const p(scene_path);
-        if (p.extension() == ".inst") {
-            auto inst = canopy::read_bench_inst(p);
-            scenes.push_back({p.filename().string(), std::move(inst.mesh.triangles), std::move(inst.instances)});
-        } else {
-            scenes.push_back({p.filename().string(), canopy::read_bench_obj(p).triangles, {}});
+    try {
+        print_header(*opt);
+        if (!opt->scene_file.empty()) {
+            run_scene(load_scene_file(opt->scene_file), *opt);
+            return 0;
         }
-    } else {
-        scenes.push_back({"icosphere, 7 subdivisions", canopy::make_icosphere(7), {}});
-        scene_input forest{"64 instances of an icosphere (5 subdivisions)", canopy::make_icosphere(5), {}};
-        for (int k = 0; k < 64; ++k) {
-            float const s = 0.5f + 0.1f * float(k % 5);
-            std::array<float, 12> rows{s, 0, 0, float(k % 8) * 3.0f, 0, s * 1.5f, 0, 0, 0, 0, s, float(k / 8) * 3.0f};
-            forest.instances.push_back(canopy::affine_transform<float>::from_rows(rows));
+        for (auto const& name : opt->scenes) {
+            bench_scene const scene = canopy::bench::make_bench_scene(name, opt->quick);
+            if (!scene.skipped.empty()) {
+                fmt::print("\n## {}\n\nSkipped: {}.\n", name, scene.skipped);
+                continue;
+            }
+            run_scene(scene, *opt);
         }
-        scenes.push_back(std::move(forest));
+    } catch (std::exception const& e) {
+        std::fprintf(stderr, "canopy_bench_embree: %s\n", e.what());
+        return 1;
     }
-    fmt::print("# Canopy vs Embree {}.{}.{} (same scenes, same rays; best of {})\n", RTC_VERSION_MAJOR,
-               RTC_VERSION_MINOR, RTC_VERSION_PATCH, repeat);
-    for (auto const& s : scenes) run_scene(s, threads, repeat, ray_sets);
 }
