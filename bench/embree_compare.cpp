@@ -55,74 +55,20 @@
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
-import canopy;
-import canopy.bench_formats;
-import canopy.bench_scenes;
+import canopy.bench_tracing;
 
 namespace {
 
 using canopy::bench::bench_scene;
+using canopy::bench::build_canopy;
+using canopy::bench::canopy_scene;
+using canopy::bench::canopy_trace;
+using canopy::bench::counting_intersector;
+using canopy::bench::make_rays;
+using canopy::bench::ray_set;
 using clock_type = std::chrono::steady_clock;
 
 double seconds_since(clock_type::time_point t) { return std::chrono::duration<double>(clock_type::now() - t).count(); }
-
-// ---- Canopy -------------------------------------------------------------------------------
-
-struct canopy_scene {
-    canopy::bvh<canopy::triangle> mesh;
-    std::vector<canopy::instance<canopy::bvh<canopy::triangle>>> instances;
-    canopy::bvh<canopy::instance<canopy::bvh<canopy::triangle>>> top;
-    bool instanced = false;
-    std::size_t bytes = 0;
-};
-
-std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in) {
-    auto s = std::make_unique<canopy_scene>();
-    s->mesh = canopy::build_binned_sah(in.mesh);
-    s->bytes = canopy::compute_stats(s->mesh).bytes;
-    if (!in.instances.empty()) {
-        for (std::size_t k = 0; k < in.instances.size(); ++k)
-            s->instances.emplace_back(s->mesh, in.instances[k], std::uint32_t(k));
-        s->top = canopy::build_binned_sah(s->instances);
-        s->bytes += canopy::compute_stats(s->top).bytes;
-        s->instanced = true;
-    }
-    return s;
-}
-
-template <typename Isect>
-canopy::bench_hit canopy_trace(canopy_scene const& s, canopy::ray const& r, bool closest, Isect& isect) {
-    canopy::basic_hit_record<float> hr;
-    if (s.instanced)
-        hr = closest ? canopy::closest_hit(r, &s.top, &s.top + 1, isect) : canopy::any_hit(r, &s.top, &s.top + 1, isect);
-    else
-        hr = closest ? canopy::closest_hit(r, &s.mesh, &s.mesh + 1, isect) : canopy::any_hit(r, &s.mesh, &s.mesh + 1, isect);
-    if (!hr.hit) return {};
-    return {hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v};
-}
-
-// Counts the tests a query makes through `Inner` (whose triangle test it calls). Its box hook is
-// called once per box instead of the 8-wide SIMD test, so it is never timed.
-template <typename Inner>
-struct counting_intersector : canopy::basic_intersector<counting_intersector<Inner>> {
-    using canopy::basic_intersector<counting_intersector<Inner>>::operator();
-
-    template <typename Ray, typename... Args>
-    auto operator()(Ray const& ray, canopy::aabb const& box, Args&&... args) {
-        ++boxes;
-        return intersect(ray, box, std::forward<Args>(args)...);
-    }
-
-    template <typename Ray>
-    auto operator()(Ray const& ray, canopy::triangle const& tri) {
-        ++triangles;
-        return canopy::test_primitive(inner, ray, tri);
-    }
-
-    Inner inner;
-    std::uint64_t boxes = 0;
-    std::uint64_t triangles = 0;
-};
 
 // ---- the intersectors compared --------------------------------------------------------------
 
@@ -252,54 +198,6 @@ canopy::bench_hit embree_trace(embree_scene const& s, canopy::ray const& r, bool
     rtcOccluded1(s.root(), &context, &ray);
     if (ray.tfar != -std::numeric_limits<float>::infinity()) return {};
     return {0.0f, canopy::occluded_unreported, canopy::invalid_id, 0.0f, 0.0f};
-}
-
-// ---- rays ---------------------------------------------------------------------------------
-
-struct ray_set {
-    std::string name;
-    std::vector<canopy::ray> rays;
-    bool shadow = false; // traced with any-hit only
-};
-
-std::vector<ray_set> make_rays(canopy_scene const& s, canopy::aabb const& box) {
-    std::vector<ray_set> sets;
-    auto const c = canopy::center(box);
-    auto const d = canopy::diagonal(box);
-    float const extent = canopy::length(d);
-    int const w = 512, h = 512;
-    canopy::vec3<float> const eye = c + canopy::vec3<float>(0.3f, 0.4f, 1.0f) * extent;
-    canopy::vec3<float> const forward = canopy::normalize(c - eye);
-    canopy::vec3<float> const right = canopy::normalize(canopy::cross(forward, canopy::vec3<float>(0, 1, 0)));
-    canopy::vec3<float> const up = canopy::cross(right, forward);
-    ray_set primary{"primary", {}, false};
-    for (int j = 0; j < h; ++j)
-        for (int i = 0; i < w; ++i) {
-            float const x = (float(i) + 0.5f) / float(w) - 0.5f, y = (float(j) + 0.5f) / float(h) - 0.5f;
-            primary.rays.push_back({eye, 0.0f, forward + right * (0.8f * x) + up * (0.8f * y),
-                                    std::numeric_limits<float>::infinity()});
-        }
-    ray_set random{"random", {}, false};
-    std::mt19937 rng(7);
-    std::uniform_real_distribution<float> u01(0.0f, 1.0f);
-    std::normal_distribution<float> n01(0.0f, 1.0f);
-    for (int k = 0; k < w * h; ++k) {
-        canopy::vec3<float> const o(box.min.x + d.x * u01(rng), box.min.y + d.y * u01(rng), box.min.z + d.z * u01(rng));
-        random.rays.push_back({o, 0.0f, {n01(rng), n01(rng), n01(rng)}, std::numeric_limits<float>::infinity()});
-    }
-    ray_set shadow{"shadow", {}, true};
-    canopy::vec3<float> const light = c + canopy::vec3<float>(-0.5f, 1.0f, 0.5f) * extent;
-    canopy::default_intersector none;
-    for (auto const& r : primary.rays) {
-        auto const hit = canopy_trace(s, r, true, none);
-        if (hit.prim == canopy::invalid_id) continue;
-        canopy::vec3<float> const p = r.origin + r.direction * hit.t;
-        shadow.rays.push_back({p, 1e-4f, light - p, 1.0f});
-    }
-    sets.push_back(std::move(primary));
-    sets.push_back(std::move(random));
-    sets.push_back(std::move(shadow));
-    return sets;
 }
 
 // ---- measuring ----------------------------------------------------------------------------

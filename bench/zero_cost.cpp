@@ -6,7 +6,9 @@
 //   MODE: default      closest_hit(r, first, last)
 //         explicit     closest_hit(r, first, last, default_intersector{})
 //         forwarding   a paper-style intersector whose hooks only forward to intersect()
-//         forwarding_tri  the same with the triangle hook only (boxes keep the SIMD test)
+//         forwarding_tri  the same with the triangle hook only (boxes keep the SIMD test; the
+//                      hook is called once per triangle, so leaves are tested one at a time)
+//         filter_all   a filter that accepts every candidate (no hooks: SIMD leaves)
 //         single       the mesh BVH traced directly (one level)
 //         instanced    the same mesh as the only instance of a top-level BVH (identity)
 //         instanced_rt the same, with a rotation + translation (transform applied)
@@ -41,6 +43,14 @@ struct forwarding_triangles : canopy::basic_intersector<forwarding_triangles> {
     }
 };
 
+// A filter that accepts everything: it must leave the default path as it is.
+struct accept_all : canopy::basic_intersector<accept_all> {
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const&) {
+        return true;
+    }
+};
+
 template <typename Structure, typename... Isect>
 [[gnu::noinline]] unsigned trace_all(std::vector<canopy::ray> const& rays, Structure const& s, Isect&&... isect) {
     unsigned hits = 0;
@@ -52,7 +62,7 @@ template <typename Structure, typename... Isect>
 
 int main(int argc, char** argv) {
     if (argc < 2) {
-        std::fprintf(stderr, "usage: %s default|explicit|forwarding|single|instanced|instanced_rt [RAYS]\n", argv[0]);
+        std::fprintf(stderr, "usage: %s default|explicit|forwarding|forwarding_tri|filter_all|single|instanced|instanced_rt [RAYS]\n", argv[0]);
         return 2;
     }
     std::string const mode = argv[1];
@@ -75,6 +85,7 @@ int main(int argc, char** argv) {
     else if (mode == "explicit") hits = trace_all(rays, mesh, canopy::default_intersector{});
     else if (mode == "forwarding") hits = trace_all(rays, mesh, forwarding{});
     else if (mode == "forwarding_tri") hits = trace_all(rays, mesh, forwarding_triangles{});
+    else if (mode == "filter_all") hits = trace_all(rays, mesh, accept_all{});
     else if (mode == "instanced") hits = trace_all(rays, top);
     else if (mode == "instanced_rt") hits = trace_all(rays, top_moved);
     else {

@@ -1,5 +1,5 @@
 // canopy.geometry — primitives and their ray tests, found by ADL as `intersect(ray, prim)`:
-// triangles (watertight by default, Möller–Trumbore opt-in), spheres, the conservative ray/box
+// triangles (watertight by default, Möller–Trumbore opt-in; blocks of four tested at once), spheres, the conservative ray/box
 // slab test, hit_record, and robust secondary-ray origins (spawn_ray). Every test works for float, double and SIMD packet rays.
 //
 // A user-defined primitive joins the library by providing, in its own namespace:
@@ -11,5 +11,6 @@ export import canopy.math;
 export import :hit_record;
 export import :box;
 export import :triangle;
+export import :triangle_block;
 export import :sphere;
 export import :spawn;

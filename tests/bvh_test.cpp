@@ -7,6 +7,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <vector>
@@ -126,8 +127,22 @@ struct wide_walk_result {
 template <typename Prim>
 wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
     wide_walk_result w;
-    w.primitive_owners.assign(b.primitives.size(), 0);
+    w.primitive_owners.assign(b.primitive_count(), 0);
     if (b.wide_nodes.empty()) return w;
+    // A leaf primitive's position in `primitives` (leaf order): its address there, or, for the
+    // copies in triangle blocks, the position of the triangle with its prim_id.
+    std::vector<std::size_t> by_prim_id;
+    if constexpr (canopy::stores_triangle_blocks_v<Prim>) {
+        by_prim_id.assign(b.primitives.size(), b.primitives.size());
+        for (std::size_t i = 0; i < b.primitives.size(); ++i)
+            if (b.primitives[i].prim_id < by_prim_id.size()) by_prim_id[b.primitives[i].prim_id] = i;
+    }
+    auto const position = [&](Prim const& p) -> std::size_t {
+        if constexpr (canopy::stores_triangle_blocks_v<Prim>)
+            return p.prim_id < by_prim_id.size() ? by_prim_id[p.prim_id] : b.primitives.size();
+        else
+            return std::size_t(&p - b.primitives.data());
+    };
     std::vector<int> reached(b.wide_nodes.size(), 0);
     struct item {
         std::uint32_t node;
@@ -156,14 +171,25 @@ wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
             }
             w.structure_ok = w.structure_ok && !seen_unused;
             if (node.count[k] > 0) {
-                if (std::size_t(node.child[k]) + node.count[k] > b.primitives.size()) {
+                std::size_t const stored = canopy::stores_triangle_blocks_v<Prim>
+                                               ? b.blocks.size() * canopy::triangle_block_width
+                                               : b.primitives.size();
+                std::size_t const per_slot = canopy::stores_triangle_blocks_v<Prim> ? canopy::triangle_block_width : 1;
+                if (std::size_t(node.child[k]) * per_slot + node.count[k] > stored) {
                     w.structure_ok = false;
                     continue;
                 }
-                for (std::uint32_t p = node.child[k]; p < node.child[k] + node.count[k]; ++p) {
-                    ++w.primitive_owners[p];
-                    w.bounds_ok = w.bounds_ok && box_contains(box, get_bounds(b.primitives[p]));
-                }
+                canopy::for_each_leaf_primitive(b, node.child[k], node.count[k], [&](Prim const& p) {
+                    std::size_t const i = position(p);
+                    if (i >= b.primitives.size()) {
+                        w.structure_ok = false;
+                        return;
+                    }
+                    if constexpr (canopy::stores_triangle_blocks_v<Prim>)  // the same bits, NaN included
+                        w.structure_ok = w.structure_ok && std::memcmp(&p, &b.primitives[i], sizeof(Prim)) == 0;
+                    ++w.primitive_owners[i];
+                    w.bounds_ok = w.bounds_ok && box_contains(box, get_bounds(p));
+                });
             } else {
                 if (node.child[k] >= b.wide_nodes.size()) {
                     w.structure_ok = false;
@@ -320,7 +346,8 @@ TEST_CASE("compute_stats is consistent with the tree") {
         CHECK(s.max_leaf_size <= std::size_t(leaf));
         CHECK(s.wide_node_count == b.wide_nodes.size());
         CHECK(s.bytes == b.nodes.size() * sizeof(mesh_bvh::node_type) +
-                             b.wide_nodes.size() * sizeof(canopy::wide_bvh_node<float>) + soup.size() * sizeof(triangle));
+                             b.wide_nodes.size() * sizeof(canopy::wide_bvh_node<float>) + soup.size() * sizeof(triangle) +
+                             b.blocks.size() * sizeof(canopy::triangle_block));
         CHECK(s.bytes_per_primitive == Approx(double(s.bytes) / double(soup.size())));
         CHECK(s.sah_cost == Approx(w.sah_cost).epsilon(1e-9));
         // At least the root's traversal, at most testing everything at every level.

@@ -48,6 +48,11 @@ struct build_context {
     std::atomic<std::uint32_t> node_count{1};
     std::atomic<int> depth{0};
     bvh_build_options options;
+    // Primitives tested together in a leaf: the SAH counts a leaf's tests as ceil(n / block_size)
+    // (triangle BVHs test blocks of four at once; Embree's builders count blocks the same way).
+    std::size_t block_size = 1;
+
+    double tests(std::size_t n) const { return double((n + block_size - 1) / block_size); }
 };
 
 template <typename S>
@@ -161,7 +166,7 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
         for (int k = bins - 1; k > 0; --k) {
             acc = extend(acc, ab[k].bounds);
             n += ab[k].count;
-            right_cost[std::size_t(k)] = n ? double(surface_area(acc)) * double(n) : 0.0;
+            right_cost[std::size_t(k)] = n ? double(surface_area(acc)) * ctx.tests(n) : 0.0;
         }
         acc = basic_aabb<S>{};
         n = 0;
@@ -169,7 +174,7 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
             acc = extend(acc, ab[k - 1].bounds);
             n += ab[k - 1].count;
             if (n == 0 || n == count) continue;
-            double const cost = double(surface_area(acc)) * double(n) + right_cost[std::size_t(k)];
+            double const cost = double(surface_area(acc)) * ctx.tests(n) + right_cost[std::size_t(k)];
             if (cost < best_cost) {
                 best_cost = cost;
                 best_axis = axis;
@@ -178,7 +183,7 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
         }
     }
 
-    double const leaf_cost = double(opt.costs.intersection) * double(count);
+    double const leaf_cost = double(opt.costs.intersection) * ctx.tests(count);
     double const split_cost = parent_area > 0.0
                                   ? opt.costs.traversal + opt.costs.intersection * best_cost / parent_area
                                   : opt.costs.traversal + leaf_cost;
@@ -246,6 +251,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
 
     detail::build_context<S> ctx;
     ctx.options = options;
+    if constexpr (stores_triangle_blocks_v<Prim>) ctx.block_size = triangle_block_width;
     ctx.boxes.resize(n);
     ctx.centers.resize(n);
     ctx.order.resize(n);
@@ -273,6 +279,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
                 result.primitives[i].prim_id = ctx.order[i];
         }
     });
+    if constexpr (stores_triangle_blocks_v<Prim>) pack_triangle_blocks(result);
     return result;
 }
 

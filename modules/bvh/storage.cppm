@@ -48,7 +48,9 @@ inline constexpr int bvh_width = 8;
 // an empty box (min = +inf, max = -inf), count = 0 and child = invalid_id.
 template <typename S>
 struct alignas(64) wide_bvh_node {
-    std::array<S, bvh_width> min_x, min_y, min_z, max_x, max_y, max_z;
+    // The children's boxes, one row per plane: planes[a] the minima and planes[3 + a] the maxima
+    // along axis a (x, y, z), one column per child.
+    std::array<std::array<S, bvh_width>, 6> planes;
     // count == 0: child is the index of a wide node (or invalid_id for an unused slot);
     // count ≥ 1: child is the first of `count` primitives of a leaf.
     std::array<std::uint32_t, bvh_width> child;
@@ -56,10 +58,17 @@ struct alignas(64) wide_bvh_node {
 
     basic_aabb<S> child_bounds(int i) const {
         auto const k = std::size_t(i);
-        return {vec3<S>(min_x[k], min_y[k], min_z[k]), vec3<S>(max_x[k], max_y[k], max_z[k])};
+        return {vec3<S>(planes[0][k], planes[1][k], planes[2][k]), vec3<S>(planes[3][k], planes[4][k], planes[5][k])};
     }
     bool used(int i) const { return child[std::size_t(i)] != invalid_id; }
 };
+
+// BVHs of float triangles keep their leaves' triangles in blocks of four as well (canopy.geometry:
+// triangle_block), which traversal tests four at a time; a wide node's leaf slot then indexes
+// blocks: `child` is the first block, `count` the number of triangles (the last block may be
+// partly used).
+template <typename Prim>
+inline constexpr bool stores_triangle_blocks_v = std::is_same_v<Prim, triangle>;
 
 template <typename Prim>
 struct bvh {
@@ -71,11 +80,25 @@ struct bvh {
     std::vector<node_type> nodes;   // binary tree, nodes[0] is the root; empty for an empty BVH
     std::vector<wide_bvh_node<value_type>> wide_nodes; // the same tree, 8-wide; [0] is the root
     std::vector<Prim> primitives;   // in leaf order
+    std::vector<triangle_block> blocks; // stores_triangle_blocks_v<Prim>: the leaves, four to a block
     int depth = 0;                  // number of node levels (a single leaf: 1)
 
     bool empty() const { return nodes.empty(); }
+    std::size_t primitive_count() const { return primitives.size(); }
     basic_aabb<value_type> bounds() const { return nodes.empty() ? basic_aabb<value_type>{} : nodes[0].bounds; }
 };
+
+// Calls f(primitive) for each primitive of the leaf that a wide node's slot (child, count) points
+// to, in leaf order: from the triangle blocks of triangle BVHs, else from `primitives`.
+template <typename Prim, typename F>
+void for_each_leaf_primitive(bvh<Prim> const& b, std::uint32_t child, std::uint32_t count, F&& f) {
+    if constexpr (stores_triangle_blocks_v<Prim>) {
+        for (std::uint32_t i = 0; i < count; ++i)
+            f(b.blocks[child + i / triangle_block_width].triangle_at(int(i % triangle_block_width)));
+    } else {
+        for (std::uint32_t i = child; i < child + count; ++i) f(b.primitives[i]);
+    }
+}
 
 // A BVH's bounds as a primitive of an enclosing structure (a list of BVHs, multiple roots).
 template <typename Prim>
@@ -97,7 +120,7 @@ struct bvh_stats {
     std::size_t max_leaf_size = 0;
     double sah_cost = 0.0;           // expected cost of a random ray hitting the root box
     std::size_t wide_node_count = 0;
-    std::size_t bytes = 0;           // binary nodes + wide nodes + primitives
+    std::size_t bytes = 0;           // binary nodes + wide nodes + primitives + triangle blocks
     double bytes_per_primitive = 0.0;
 };
 
@@ -110,7 +133,7 @@ bvh_stats compute_stats(bvh<Prim> const& b, sah_costs costs = {}) {
     s.wide_node_count = b.wide_nodes.size();
     s.bytes = b.nodes.size() * sizeof(typename bvh<Prim>::node_type) +
               b.wide_nodes.size() * sizeof(wide_bvh_node<typename bvh<Prim>::value_type>) +
-              b.primitives.size() * sizeof(Prim);
+              b.primitives.size() * sizeof(Prim) + b.blocks.size() * sizeof(triangle_block);
     if (b.nodes.empty()) return s;
     double const root_area = surface_area(b.nodes[0].bounds);
     for (auto const& n : b.nodes) {

@@ -2,22 +2,27 @@
 // and query.
 //
 // Each visited node tests its children's boxes, nearest hit child first, the others pushed far to
-// near (queries that stop at any hit, Query::wants_near_first == false, skip the ordering). Which box test runs is decided at compile time:
+// near (queries that stop at any hit, Query::wants_near_first == false, skip the ordering). Which
+// box test runs is decided at compile time (node_tester):
 // - the intersector has its own box hook → the hook, once per child box (it sees every test);
-// - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls);
+// - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls), with
+//   the ray's constants computed once per BVH (wide_box_ray);
 // - otherwise (double rays, packets) → the library's box test, once per child box.
 // All three compute the same conservative test (canopy.geometry:box): same hits, same order.
 // Every primitive goes through call_hooks_or_descend (canopy.intersector): nested BVHs and
-// instances receive the same intersector and query. Stacked entries whose entry distance lies
-// beyond the ray's current tmax are skipped (closest-hit culling). Packet rays visit a child
-// when any active lane hits it. The memory of every hit child is prefetched as soon as the node
-// test is done, so that cache misses overlap (incoherent rays in large BVHs are memory-bound).
+// instances receive the same intersector and query; the leaves of triangle BVHs are blocks of four
+// triangles. Stacked entries whose entry distance lies beyond the ray's current tmax are skipped
+// (closest-hit culling). Packet rays visit a child when any active lane hits it. The memory of
+// every hit child is prefetched as soon as the node test is done, so that cache misses overlap
+// (incoherent rays in large BVHs are memory-bound).
 module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
 // every path (scalar, SIMD, packet) rounds the same way.
 #pragma STDC FP_CONTRACT OFF
+#include <algorithm>
 #include <array>
 #include <bit>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <type_traits>
@@ -37,26 +42,52 @@ struct child_hits {
     std::array<S, bvh_width> tnear;
 };
 
-// All eight child boxes against one scalar float ray at once; the same arithmetic as
-// canopy.geometry:box, lane by lane.
-[[gnu::always_inline]] inline child_hits<float> test_children_wide(prepared_ray<float> const& ray,
+// The constants of the 8-wide box test for one scalar float ray, computed once per BVH: origin
+// and inverse direction in every lane, and which plane row is near and which far on each axis
+// (by the sign of the inverse direction, Ize 2013's ordered slabs: no select per node).
+struct wide_box_ray {
+    [[gnu::always_inline]] explicit wide_box_ray(prepared_ray<float> const& ray) {
+        for (int a = 0; a < 3; ++a) {
+            auto const k = std::size_t(a);
+            origin[k] = simd::float8(ray.origin[a]);
+            inv_dir[k] = simd::float8(ray.inv_dir[a]);
+            // -0 has no inverse of its own: 1/-0 = -inf counts as negative, as in canopy.geometry:box.
+            bool const negative = ray.inv_dir[a] < 0.0f;
+            near_row[k] = negative ? 3 + k : k;
+            far_row[k] = negative ? k : 3 + k;
+        }
+        tmin = simd::float8(ray.tmin);
+        set_tmax(ray.tmax);
+    }
+
+    [[gnu::always_inline]] void set_tmax(float ray_tmax) {
+        box_tmax = box_test_tmax(ray_tmax);
+        box_tmax8 = simd::float8(box_tmax);
+    }
+
+    std::array<simd::float8, 3> origin, inv_dir;
+    std::array<std::size_t, 3> near_row, far_row;
+    simd::float8 tmin, box_tmax8;
+    float box_tmax = 0.0f;
+};
+
+// All eight child boxes against one scalar float ray at once; lane by lane the arithmetic of
+// canopy.geometry:box. The far distances are scaled once, after their minimum: rounding is
+// monotonic, so min(fl(a·s), fl(b·s)) = fl(min(a, b)·s) exactly; NaN distances (a ray in a
+// slab's boundary plane) drop out of max/min on the same side as in the per-box test.
+[[gnu::always_inline]] inline child_hits<float> test_children_wide(wide_box_ray const& ray,
                                                                    wide_bvh_node<float> const& node) {
     using simd::float8;
     constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
-    float8 tnear(ray.tmin), tfar(box_test_tmax(ray.tmax));
-    auto slab = [&](std::array<float, bvh_width> const& lo, std::array<float, bvh_width> const& hi, float origin,
-                    float inv) {
-        float8 const t0 = (float8::load(lo.data()) - float8(origin)) * float8(inv);
-        float8 const t1 = (float8::load(hi.data()) - float8(origin)) * float8(inv);
-        bool const negative = inv < 0.0f;
-        float8 const slab_near = negative ? t1 : t0;
-        float8 const slab_far = (negative ? t0 : t1) * float8(far_scale);
+    float8 tnear = ray.tmin;
+    float8 tfar(std::numeric_limits<float>::infinity());
+    for (std::size_t a = 0; a < 3; ++a) {
+        float8 const slab_near = (float8::load(node.planes[ray.near_row[a]].data()) - ray.origin[a]) * ray.inv_dir[a];
+        float8 const slab_far = (float8::load(node.planes[ray.far_row[a]].data()) - ray.origin[a]) * ray.inv_dir[a];
         tnear = simd::max(slab_near, tnear);
         tfar = simd::min(slab_far, tfar);
-    };
-    slab(node.min_x, node.max_x, ray.origin.x, ray.inv_dir.x);
-    slab(node.min_y, node.max_y, ray.origin.y, ray.inv_dir.y);
-    slab(node.min_z, node.max_z, ray.origin.z, ray.inv_dir.z);
+    }
+    tfar = simd::min(tfar * float8(far_scale), ray.box_tmax8);
     // Unused slots hold empty boxes, but a NaN or infinite ray can make any box look hit: they
     // are masked out by their child index.
     auto const used = simd::int8::load(reinterpret_cast<std::int32_t const*>(node.child.data())) !=
@@ -85,15 +116,48 @@ template <typename T, typename S, typename I>
     return h;
 }
 
-template <typename T, typename S, typename I>
-[[gnu::always_inline]] inline child_hits<S> test_children(prepared_ray<T> const& ray, wide_bvh_node<S> const& node,
-                                                          I& isect) {
-    if constexpr (std::is_same_v<T, float> && std::is_same_v<S, float> &&
-                  !box_hook_for<I, prepared_ray<T>, basic_aabb<S>, vec3<T>>)
-        return test_children_wide(ray, node);
+// Largest tmax over the lanes (inactive lanes hold -inf).
+template <typename T>
+auto widest_tmax(T const& tmax) {
+    if constexpr (simd::simd_width_v<T> == 1)
+        return tmax;
     else
-        return test_children_each(ray, node, isect);
+        return simd::reduce_max(tmax);
 }
+
+// The box test of one traversal, chosen at compile time (see the top of this file). test(node)
+// gives the hit children; box_tmax() the distance beyond which a stacked child is culled;
+// tmax_changed() is called after leaves, which may have tightened the ray's tmax.
+template <typename T, typename S, typename I>
+inline constexpr bool uses_wide_box_test = std::is_same_v<T, float> && std::is_same_v<S, float> &&
+                                           !box_hook_for<I, prepared_ray<T>, basic_aabb<S>, vec3<T>>;
+
+template <typename T, typename S, typename I>
+struct node_tester {
+    node_tester(prepared_ray<T> const& r, I& i) : ray(r), isect(i) {}
+
+    child_hits<S> test(wide_bvh_node<S> const& node) { return test_children_each(ray, node, isect); }
+    S box_tmax() const { return box_test_tmax(widest_tmax(ray.tmax)); }
+    void tmax_changed() {}
+
+    prepared_ray<T> const& ray;
+    I& isect;
+};
+
+template <typename T, typename S, typename I>
+    requires uses_wide_box_test<T, S, I>
+struct node_tester<T, S, I> {
+    node_tester(prepared_ray<float> const& r, I&) : ray(r), box_ray(r) {}
+
+    [[gnu::always_inline]] child_hits<float> test(wide_bvh_node<float> const& node) const {
+        return test_children_wide(box_ray, node);
+    }
+    float box_tmax() const { return box_ray.box_tmax; }
+    void tmax_changed() { box_ray.set_tmax(ray.tmax); }
+
+    prepared_ray<float> const& ray;
+    wide_box_ray box_ray;
+};
 
 // Starts loading the memory of the hit children (wide nodes, or a leaf's primitives) into the
 // cache, so that the loads of all of them overlap with each other and with the work on the
@@ -108,6 +172,10 @@ template <typename Prim, typename S>
             // A wide node: aligned to a cache line, sizeof(wide_bvh_node<S>) / 64 lines.
             auto const* p = reinterpret_cast<char const*>(&b.wide_nodes[node.child[i]]);
             for (std::size_t k = 0; k < sizeof(wide_bvh_node<S>); k += line) __builtin_prefetch(p + k);
+        } else if constexpr (stores_triangle_blocks_v<Prim>) {
+            // The leaf's first block (most leaves have one): aligned, three lines.
+            auto const* p = reinterpret_cast<char const*>(&b.blocks[node.child[i]]);
+            for (std::size_t k = 0; k < sizeof(triangle_block); k += line) __builtin_prefetch(p + k);
         } else {
             auto const begin = reinterpret_cast<std::uintptr_t>(&b.primitives[node.child[i]]);
             auto const end = begin + node.count[i] * sizeof(Prim);
@@ -117,13 +185,89 @@ template <typename Prim, typename S>
     }
 }
 
-// Largest tmax over the lanes (inactive lanes hold -inf).
-template <typename T>
-auto widest_tmax(T const& tmax) {
-    if constexpr (simd::simd_width_v<T> == 1)
-        return tmax;
-    else
-        return simd::reduce_max(tmax);
+// One pending child: a wide node (count 0) or a leaf, with the distance at which the ray enters it.
+template <typename S>
+struct traversal_entry {
+    std::uint32_t child;
+    std::uint32_t count; // 0: wide node; ≥ 1: leaf
+    S tnear;
+};
+
+// The pending children of one traversal. Depth never exceeds bvh_max_depth, and each level
+// pushes at most bvh_width - 1 entries.
+template <typename S>
+struct traversal_stack {
+    void push(traversal_entry<S> const& e) { entries[std::size_t(size++)] = e; }
+
+    // Pops into `next` the most recent entry that the ray still enters before box_tmax; false
+    // when none is left.
+    bool pop_nearer_than(S box_tmax, traversal_entry<S>& next) {
+        while (size > 0) {
+            auto const& e = entries[std::size_t(--size)];
+            if (e.tnear <= box_tmax) {
+                next = e;
+                return true;
+            }
+        }
+        return false;
+    }
+
+    std::array<traversal_entry<S>, (bvh_width - 1) * bvh_max_depth + 1> entries;
+    int size = 0;
+};
+
+// The hit children of `node` in visiting order: returns the first to visit and pushes the
+// others so that they pop in order. Near to far when the query wants it (closest, multi hit;
+// as Embree's traverseClosestHit: one and two children without sorting, more by insertion
+// sort); else in slot order (any hit: every hit child is visited until one primitive is hit).
+template <bool near_first, typename S>
+[[gnu::always_inline]] inline traversal_entry<S> order_children(wide_bvh_node<S> const& node, child_hits<S> const& hits,
+                                                                traversal_stack<S>& stack) {
+    auto const entry = [&](std::uint32_t i) {
+        return traversal_entry<S>{node.child[i], node.count[i], hits.tnear[i]};
+    };
+    std::uint32_t const first = std::uint32_t(std::countr_zero(hits.mask));
+    std::uint32_t rest = hits.mask & (hits.mask - 1);
+    if constexpr (!near_first) {
+        for (; rest != 0; rest &= rest - 1) stack.push(entry(std::uint32_t(std::countr_zero(rest))));
+        return entry(first);
+    } else {
+        auto const one = entry(first);
+        if (rest == 0) return one;
+        if ((rest & (rest - 1)) == 0) {
+            auto const two = entry(std::uint32_t(std::countr_zero(rest)));
+            bool const two_first = two.tnear < one.tnear;
+            stack.push(two_first ? one : two);
+            return two_first ? two : one;
+        }
+        std::array<traversal_entry<S>, bvh_width> order;
+        int n = 0;
+        for (std::uint32_t m = hits.mask; m != 0; m &= m - 1) {
+            auto const e = entry(std::uint32_t(std::countr_zero(m)));
+            int j = n++;
+            for (; j > 0 && e.tnear < order[std::size_t(j - 1)].tnear; --j) order[std::size_t(j)] = order[std::size_t(j - 1)];
+            order[std::size_t(j)] = e;
+        }
+        for (int j = n - 1; j > 0; --j) stack.push(order[std::size_t(j)]);
+        return order[0];
+    }
+}
+
+// The primitives of one leaf through call_hooks_or_descend: blocks of four triangles for triangle
+// BVHs, else one primitive at a time. True when the query is finished.
+template <typename T, typename Prim, typename I, typename Query>
+[[gnu::always_inline]] inline bool visit_leaf(prepared_ray<T>& ray, bvh<Prim> const& b, std::uint32_t first,
+                                              std::uint32_t count, I& isect, Query& query) {
+    if constexpr (stores_triangle_blocks_v<Prim>) {
+        int remaining = int(count);
+        for (std::uint32_t k = first; remaining > 0; ++k, remaining -= triangle_block_width)
+            if (call_hooks_or_descend(ray, b.blocks[k], std::min(remaining, triangle_block_width), isect, query))
+                return true;
+    } else {
+        for (std::uint32_t i = first, end = first + count; i < end; ++i)
+            if (call_hooks_or_descend(ray, b.primitives[i], isect, query)) return true;
+    }
+    return false;
 }
 
 } // namespace detail
@@ -134,75 +278,23 @@ template <typename T, typename Prim, typename I, typename Query>
 bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
     using S = typename bvh<Prim>::value_type;
     if (b.wide_nodes.empty()) return false;
-
-    struct entry {
-        std::uint32_t child;
-        std::uint32_t count; // 0: wide node; ≥ 1: leaf
-        S tnear;
-    };
-    std::array<entry, (bvh_width - 1) * bvh_max_depth + 1> stack;
-    int size = 0;
-    entry current{0, 0, S(0)};
+    detail::node_tester<T, S, I> nodes(ray, isect);
+    detail::traversal_stack<S> stack;
+    detail::traversal_entry<S> current{0, 0, S(0)};
     for (;;) {
         if (current.count == 0) {
             auto const& node = b.wide_nodes[current.child];
-            auto const hits = detail::test_children(ray, node, isect);
+            auto const hits = nodes.test(node);
             if (hits.mask != 0) {
                 detail::prefetch_children(b, node, hits.mask);
-                if constexpr (!Query::wants_near_first) {
-                    // Any accepted hit ends the query: visit children in slot order.
-                    std::uint32_t m = hits.mask;
-                    auto const first = std::size_t(std::countr_zero(m));
-                    for (m &= m - 1; m != 0; m &= m - 1) {
-                        auto const i = std::size_t(std::countr_zero(m));
-                        stack[std::size_t(size++)] = {node.child[i], node.count[i], hits.tnear[i]};
-                    }
-                    current = {node.child[first], node.count[first], hits.tnear[first]};
-                    continue;
-                }
-                std::uint32_t const first = std::uint32_t(std::countr_zero(hits.mask));
-                std::uint32_t const rest = hits.mask & (hits.mask - 1);
-                entry const one{node.child[first], node.count[first], hits.tnear[first]};
-                if (rest == 0) { // one child hit: no ordering
-                    current = one;
-                    continue;
-                }
-                if ((rest & (rest - 1)) == 0) { // two: the nearer first
-                    auto const second = std::size_t(std::countr_zero(rest));
-                    entry const two{node.child[second], node.count[second], hits.tnear[second]};
-                    bool const two_first = two.tnear < one.tnear;
-                    stack[std::size_t(size++)] = two_first ? one : two;
-                    current = two_first ? two : one;
-                    continue;
-                }
-                // Order the hit children near to far (insertion sort of at most eight).
-                std::array<entry, bvh_width> order;
-                int n = 0;
-                for (std::uint32_t m = hits.mask; m != 0; m &= m - 1) {
-                    auto const i = std::size_t(std::countr_zero(m));
-                    entry const e{node.child[i], node.count[i], hits.tnear[i]};
-                    int j = n++;
-                    for (; j > 0 && e.tnear < order[std::size_t(j - 1)].tnear; --j)
-                        order[std::size_t(j)] = order[std::size_t(j - 1)];
-                    order[std::size_t(j)] = e;
-                }
-                for (int j = n - 1; j > 0; --j) stack[std::size_t(size++)] = order[std::size_t(j)];
-                current = order[0];
+                current = detail::order_children<Query::wants_near_first>(node, hits, stack);
                 continue;
             }
         } else {
-            for (std::uint32_t i = current.child, end = current.child + current.count; i < end; ++i)
-                if (call_hooks_or_descend(ray, b.primitives[i], isect, query)) return true;
+            if (detail::visit_leaf(ray, b, current.child, current.count, isect, query)) return true;
+            nodes.tmax_changed();
         }
-        // Pop the next entry still in front of the ray's (possibly tightened) tmax.
-        for (;;) {
-            if (size == 0) return false;
-            entry const& e = stack[std::size_t(--size)];
-            if (e.tnear <= box_test_tmax(detail::widest_tmax(ray.tmax))) {
-                current = e;
-                break;
-            }
-        }
+        if (!stack.pop_nearer_than(nodes.box_tmax(), current)) return false;
     }
 }
 

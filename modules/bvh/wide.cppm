@@ -3,11 +3,13 @@
 // Each wide node takes the children of a binary node and keeps opening the inner child with the
 // largest surface area until it holds bvh_width children or only leaves (the greedy collapse of
 // Wald et al. 2008 / Embree). Leaves are kept as they are: every primitive stays in exactly one
-// leaf. The wide tree is never deeper than the binary one.
+// leaf. The wide tree is never deeper than the binary one. Triangle BVHs then get their leaves
+// packed into blocks of four (pack_triangle_blocks).
 module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
 // every path (scalar, SIMD, packet) rounds the same way.
 #pragma STDC FP_CONTRACT OFF
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -54,8 +56,7 @@ std::uint32_t collapse_node(std::vector<bvh_node<S>> const& nodes, std::uint32_t
     {
         auto& w = wide.back();
         S const inf = std::numeric_limits<S>::infinity();
-        w.min_x.fill(inf), w.min_y.fill(inf), w.min_z.fill(inf);
-        w.max_x.fill(-inf), w.max_y.fill(-inf), w.max_z.fill(-inf);
+        for (std::size_t a = 0; a < 3; ++a) w.planes[a].fill(inf), w.planes[3 + a].fill(-inf);
         w.child.fill(invalid_id);
         w.count.fill(0);
     }
@@ -65,8 +66,10 @@ std::uint32_t collapse_node(std::vector<bvh_node<S>> const& nodes, std::uint32_t
         std::uint32_t child = c.index;
         if (!c.is_leaf()) child = collapse_node(nodes, slots[i], wide);
         auto& w = wide[index]; // collapse_node may have reallocated
-        w.min_x[k] = c.bounds.min.x, w.min_y[k] = c.bounds.min.y, w.min_z[k] = c.bounds.min.z;
-        w.max_x[k] = c.bounds.max.x, w.max_y[k] = c.bounds.max.y, w.max_z[k] = c.bounds.max.z;
+        for (int a = 0; a < 3; ++a) {
+            w.planes[std::size_t(a)][k] = c.bounds.min[a];
+            w.planes[std::size_t(3 + a)][k] = c.bounds.max[a];
+        }
         w.child[k] = child;
         w.count[k] = c.count;
     }
@@ -83,6 +86,22 @@ std::vector<wide_bvh_node<S>> collapse_to_wide(std::vector<bvh_node<S>> const& n
     wide.reserve(nodes.size() / 4 + 1);
     detail::collapse_node(nodes, 0, wide);
     return wide;
+}
+
+// Copies the leaves' triangles of a triangle BVH into blocks of four, leaf by leaf in the order
+// of the wide nodes, and points the wide nodes' leaf slots at the blocks (count unchanged).
+template <typename Prim>
+    requires stores_triangle_blocks_v<Prim>
+void pack_triangle_blocks(bvh<Prim>& b) {
+    b.blocks.clear();
+    for (auto& node : b.wide_nodes)
+        for (std::size_t k = 0; k < std::size_t(bvh_width); ++k) {
+            if (node.count[k] == 0) continue;
+            auto const first = b.primitives.begin() + std::ptrdiff_t(node.child[k]);
+            auto const block = std::uint32_t(b.blocks.size());
+            append_triangle_blocks(b.blocks, first, first + std::ptrdiff_t(node.count[k]));
+            node.child[k] = block;
+        }
 }
 
 } // namespace canopy

@@ -113,19 +113,22 @@ watertight_shear<T> make_watertight_shear(vec3<T> const& dir) {
     return s;
 }
 
-// A ray with its per-ray constants computed once: the watertight shear and the inverse
-// direction of the box test. Traversal hands these to hooks as their `Ray`; since it derives
-// from basic_ray, hooks read origin/direction/tmin/tmax as usual and `intersect(ray, tri)`
-// inside a hook picks up the cached shear. Results are bit-identical to a plain basic_ray.
+// A ray with its per-ray constants computed once: the watertight shear (with the origin in the
+// shear's axis order) and the inverse direction of the box test. Traversal hands these to hooks
+// as their `Ray`; since it derives from basic_ray, hooks read origin/direction/tmin/tmax as usual
+// and `intersect(ray, tri)` inside a hook picks up the cached shear. Results are bit-identical to
+// a plain basic_ray.
 template <typename T>
 struct prepared_ray : basic_ray<T> {
     prepared_ray() = default;
     explicit prepared_ray(basic_ray<T> const& r)
         : basic_ray<T>(r), shear(make_watertight_shear(r.direction)),
-          inv_dir(simd::rcp(r.direction.x), simd::rcp(r.direction.y), simd::rcp(r.direction.z)) {}
+          inv_dir(simd::rcp(r.direction.x), simd::rcp(r.direction.y), simd::rcp(r.direction.z)),
+          permuted_origin(shear.permute(r.origin)) {}
 
     watertight_shear<T> shear;
     vec3<T> inv_dir;
+    vec3<T> permuted_origin;
 };
 
 template <typename Ray>

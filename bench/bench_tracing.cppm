@@ -1,0 +1,127 @@
+// canopy.bench_tracing — what the benchmark drivers share: a bench scene built as Canopy BVHs
+// (one level, or a top-level BVH over instances of one mesh), one query on it, a counting
+// intersector, and the three ray sets of a scene.
+//
+//   primary  a 512 × 512 pinhole camera looking at the scene's box from outside
+//   random   origins uniform in the scene's box, directions from a normal distribution
+//   shadow   from every primary hit toward a light outside the box (tmin 1e-4, tmax 1: the light)
+module;
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <random>
+#include <string>
+#include <utility>
+#include <vector>
+export module canopy.bench_tracing;
+export import canopy;
+export import canopy.bench_formats;
+export import canopy.bench_scenes;
+
+export namespace canopy::bench {
+
+struct canopy_scene {
+    bvh<triangle> mesh;
+    std::vector<instance<bvh<triangle>>> instances;
+    bvh<instance<bvh<triangle>>> top;
+    bool instanced = false;
+    std::size_t bytes = 0;
+};
+
+std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in) {
+    auto s = std::make_unique<canopy_scene>();
+    s->mesh = build_binned_sah(in.mesh);
+    s->bytes = compute_stats(s->mesh).bytes;
+    if (!in.instances.empty()) {
+        for (std::size_t k = 0; k < in.instances.size(); ++k)
+            s->instances.emplace_back(s->mesh, in.instances[k], std::uint32_t(k));
+        s->top = build_binned_sah(s->instances);
+        s->bytes += compute_stats(s->top).bytes;
+        s->instanced = true;
+    }
+    return s;
+}
+
+template <typename Isect>
+bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect& isect) {
+    basic_hit_record<float> hr;
+    if (s.instanced)
+        hr = closest ? closest_hit(r, &s.top, &s.top + 1, isect) : any_hit(r, &s.top, &s.top + 1, isect);
+    else
+        hr = closest ? closest_hit(r, &s.mesh, &s.mesh + 1, isect) : any_hit(r, &s.mesh, &s.mesh + 1, isect);
+    if (!hr.hit) return {};
+    return {hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v};
+}
+
+// Counts the tests a query makes through `Inner` (whose triangle test it calls). Its box hook is
+// called once per box instead of the 8-wide SIMD test, so it is never timed.
+template <typename Inner>
+struct counting_intersector : basic_intersector<counting_intersector<Inner>> {
+    using basic_intersector<counting_intersector<Inner>>::operator();
+
+    template <typename Ray, typename... Args>
+    auto operator()(Ray const& ray, aabb const& box, Args&&... args) {
+        ++boxes;
+        return intersect(ray, box, std::forward<Args>(args)...);
+    }
+
+    template <typename Ray>
+    auto operator()(Ray const& ray, triangle const& tri) {
+        ++triangles;
+        return test_primitive(inner, ray, tri);
+    }
+
+    Inner inner;
+    std::uint64_t boxes = 0;
+    std::uint64_t triangles = 0;
+};
+
+
+struct ray_set {
+    std::string name;
+    std::vector<ray> rays;
+    bool shadow = false; // traced with any-hit only
+};
+
+std::vector<ray_set> make_rays(canopy_scene const& s, aabb const& box) {
+    std::vector<ray_set> sets;
+    auto const c = center(box);
+    auto const d = diagonal(box);
+    float const extent = length(d);
+    int const w = 512, h = 512;
+    vec3<float> const eye = c + vec3<float>(0.3f, 0.4f, 1.0f) * extent;
+    vec3<float> const forward = normalize(c - eye);
+    vec3<float> const right = normalize(cross(forward, vec3<float>(0, 1, 0)));
+    vec3<float> const up = cross(right, forward);
+    ray_set primary{"primary", {}, false};
+    for (int j = 0; j < h; ++j)
+        for (int i = 0; i < w; ++i) {
+            float const x = (float(i) + 0.5f) / float(w) - 0.5f, y = (float(j) + 0.5f) / float(h) - 0.5f;
+            primary.rays.push_back({eye, 0.0f, forward + right * (0.8f * x) + up * (0.8f * y),
+                                    std::numeric_limits<float>::infinity()});
+        }
+    ray_set random{"random", {}, false};
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+    std::normal_distribution<float> n01(0.0f, 1.0f);
+    for (int k = 0; k < w * h; ++k) {
+        vec3<float> const o(box.min.x + d.x * u01(rng), box.min.y + d.y * u01(rng), box.min.z + d.z * u01(rng));
+        random.rays.push_back({o, 0.0f, {n01(rng), n01(rng), n01(rng)}, std::numeric_limits<float>::infinity()});
+    }
+    ray_set shadow{"shadow", {}, true};
+    vec3<float> const light = c + vec3<float>(-0.5f, 1.0f, 0.5f) * extent;
+    default_intersector none;
+    for (auto const& r : primary.rays) {
+        auto const hit = canopy_trace(s, r, true, none);
+        if (hit.prim == invalid_id) continue;
+        vec3<float> const p = r.origin + r.direction * hit.t;
+        shadow.rays.push_back({p, 1e-4f, light - p, 1.0f});
+    }
+    sets.push_back(std::move(primary));
+    sets.push_back(std::move(random));
+    sets.push_back(std::move(shadow));
+    return sets;
+}
+
+} // namespace canopy::bench

@@ -1,0 +1,93 @@
+// profile_rays — one scene, one ray set, one query, traced in one function, for profilers:
+// callgrind counts instructions per ray (bench/profile.sh), perf samples where the time goes.
+//
+//   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha] [--passes P]
+//   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
+//   RAYS   primary | random | shadow        QUERY  closest | any
+//
+// Traces the first N rays of the set (default: all) P times (default 1) inside trace_rays, the
+// only function a profiler needs to look at, then prints the ray count, hits, nanoseconds per ray
+// (the fastest pass) and, from an untimed pass with a counting intersector, box and triangle
+// tests per ray.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+import canopy.bench_tracing;
+
+namespace {
+
+using namespace canopy::bench;
+
+template <typename Isect>
+[[gnu::noinline]] std::size_t trace_rays(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest,
+                                         Isect& isect) {
+    std::size_t hits = 0;
+    for (auto const& r : rays) hits += canopy_trace(s, r, closest, isect).prim != canopy::invalid_id;
+    return hits;
+}
+
+int usage(char const* program) {
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha] [--passes P]\n",
+                 program);
+    return 2;
+}
+
+template <typename Isect>
+int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest, int passes) {
+    Isect isect;
+    std::size_t hits = 0;
+    double seconds = 1e30;
+    for (int p = 0; p < passes; ++p) {
+        auto const start = std::chrono::steady_clock::now();
+        hits = trace_rays(s, rays, closest, isect);
+        seconds = std::min(seconds, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    }
+    counting_intersector<Isect> counter;
+    for (auto const& r : rays) canopy_trace(s, r, closest, counter);
+    double const n = double(rays.size());
+    std::printf("rays %zu, hits %zu, %.1f ns/ray, %.2f box tests/ray, %.2f triangle tests/ray\n", rays.size(), hits,
+                seconds * 1e9 / n, double(counter.boxes) / n, double(counter.triangles) / n);
+    return 0;
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+    if (argc < 4) return usage(argv[0]);
+    std::string const scene_name = argv[1], set_name = argv[2], query = argv[3];
+    bool quick = false, alpha = false;
+    std::size_t count = 0;
+    int passes = 1;
+    for (int i = 4; i < argc; ++i) {
+        std::string const a = argv[i];
+        if (a == "--quick") quick = true;
+        else if (a == "--alpha") alpha = true;
+        else if (a == "--count" && i + 1 < argc) count = std::size_t(std::atoll(argv[++i]));
+        else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
+        else return usage(argv[0]);
+    }
+    if (query != "closest" && query != "any") return usage(argv[0]);
+    auto const scene = make_bench_scene(scene_name, quick);
+    if (!scene.skipped.empty()) {
+        std::fprintf(stderr, "%s: %s\n", scene_name.c_str(), scene.skipped.c_str());
+        return 1;
+    }
+    auto const s = build_canopy(scene);
+    auto const st = canopy::compute_stats(s->mesh);
+    std::printf("mesh BVH: %zu triangles, %zu leaves (%.2f triangles each), %zu wide nodes, %zu blocks, depth %d, "
+                "SAH %.2f, %.1f bytes/triangle\n",
+                st.primitive_count, st.leaf_count, double(st.primitive_count) / double(st.leaf_count),
+                st.wide_node_count, s->mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive);
+    auto sets = make_rays(*s, s->instanced ? s->top.bounds() : s->mesh.bounds());
+    for (auto& set : sets) {
+        if (set.name != set_name) continue;
+        if (count != 0 && count < set.rays.size()) set.rays.resize(count);
+        bool const closest = query == "closest";
+        return alpha ? run<canopy::bench_alpha_intersector>(*s, set.rays, closest, passes)
+                     : run<canopy::default_intersector>(*s, set.rays, closest, passes);
+    }
+    return usage(argv[0]);
+}

@@ -1,0 +1,137 @@
+// canopy.geometry:triangle_block — four triangles stored structure-of-arrays, tested against one
+// ray at once (the layout of Embree's triangle4; Wald et al. 2008, "Getting Rid of Packets").
+//
+// A block holds the triangles exactly as given (vertices, prim_id, geom_id): triangle_at(lane)
+// gives back the very triangle, so hooks that see one triangle at a time are fed from blocks.
+// Lanes past a leaf's last triangle are unused. `testable` marks the used lanes whose triangle
+// is not degenerate (is_degenerate, exact in double, decided once when the block is filled):
+// the block test never reports the others, as the one-triangle test never reports a degenerate
+// triangle. A block is 192 bytes, three cache lines.
+//
+// The block test is the watertight test of canopy.geometry:triangle (Woop, Benthin, Wald 2013)
+// run lane by lane with the same operations in the same order, so each lane's hit, t, u and v are
+// bit-identical to intersect(ray, triangle(lane)): same translation, permutation and shear of each
+// vertex, the same Kahan difference of products for the edge functions, the same divisions. The
+// degenerate-triangle check (zero area, exact in double) is left to the caller, for the lanes it
+// reports, as the scalar test does it only for hits.
+module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
+#include <array>
+#include <bit>
+#include <cstdint>
+#include <limits>
+#include <vector>
+export module canopy.geometry:triangle_block;
+import canopy.math;
+import :hit_record;
+import :triangle;
+
+export namespace canopy {
+
+inline constexpr int triangle_block_width = 4;
+
+struct alignas(64) triangle_block {
+    using lanes = std::array<float, triangle_block_width>;
+    // vertex[k][c][lane]: component c (x, y, z) of vertex k (v0, v1, v2).
+    std::array<std::array<lanes, 3>, 3> vertex;
+    std::array<std::uint32_t, triangle_block_width> prim_id;
+    std::array<std::uint32_t, triangle_block_width> geom_id;
+    std::uint32_t testable = 0; // bit i: lane i holds a triangle that is not degenerate
+
+    [[gnu::always_inline]] triangle triangle_at(int lane) const {
+        auto const l = std::size_t(lane);
+        auto const v = [&](std::size_t k) { return vec3<float>(vertex[k][0][l], vertex[k][1][l], vertex[k][2][l]); };
+        return {v(0), v(1), v(2), prim_id[l], geom_id[l]};
+    }
+
+    void set(int lane, triangle const& t) {
+        auto const l = std::size_t(lane);
+        vec3<float> const v[3] = {t.v0, t.v1, t.v2};
+        for (std::size_t k = 0; k < 3; ++k)
+            for (int c = 0; c < 3; ++c) vertex[k][std::size_t(c)][l] = v[k][c];
+        prim_id[l] = t.prim_id;
+        geom_id[l] = t.geom_id;
+        if (is_degenerate(t))
+            testable &= ~(1u << lane);
+        else
+            testable |= 1u << lane;
+    }
+};
+
+// Blocks holding the triangles [first, last) in order, four to a block; unused lanes of the last
+// block hold zero vertices and invalid ids and are never tested.
+template <typename It>
+void append_triangle_blocks(std::vector<triangle_block>& blocks, It first, It last) {
+    for (int lane = triangle_block_width; first != last; ++first, ++lane) {
+        if (lane == triangle_block_width) {
+            blocks.push_back({});
+            blocks.back().prim_id.fill(invalid_id);
+            blocks.back().geom_id.fill(invalid_id);
+            lane = 0;
+        }
+        blocks.back().set(lane, *first);
+    }
+}
+
+// The candidates of one block test: bit i of `mask` set when lane i hits, with t in [tmin, tmax];
+// the edge functions ev, ew and the determinant give u = ev / det, v = ew / det.
+struct triangle_block_hits {
+    std::uint32_t mask = 0;
+    std::array<float, triangle_block_width> t, ev, ew, det;
+
+    // The record of lane i as intersect(ray, triangle) returns it for that triangle.
+    [[gnu::always_inline]] basic_hit_record<float> record(triangle_block const& b, int i) const {
+        auto const l = std::size_t(i);
+        basic_hit_record<float> hr;
+        record_hit(hr, true, t[l], ev[l] / det[l], ew[l] / det[l], b.prim_id[l], b.geom_id[l]);
+        return hr;
+    }
+};
+
+// The testable lanes of b against a prepared ray (its watertight shear and permuted origin
+// known). Lane by lane the operations of intersect_watertight (canopy.geometry:triangle), in the
+// same order.
+[[gnu::always_inline]] inline triangle_block_hits intersect_block(prepared_ray<float> const& ray,
+                                                                  triangle_block const& b) {
+    using simd::float4;
+    triangle_block_hits h;
+    auto const& shear = ray.shear;
+    auto const kx = std::size_t(shear.kx), ky = std::size_t(shear.ky), kz = std::size_t(shear.kz);
+    float4 const ox(ray.permuted_origin.x), oy(ray.permuted_origin.y), oz(ray.permuted_origin.z);
+    float4 const sx(shear.sx), sy(shear.sy), sz(shear.sz);
+
+    // Translate to the ray origin, permute, shear (each vertex on its own).
+    auto const sheared = [&](std::size_t k, float4& x, float4& y, float4& z) {
+        z = float4::load(b.vertex[k][kz].data()) - oz;
+        x = (float4::load(b.vertex[k][kx].data()) - ox) - sx * z;
+        y = (float4::load(b.vertex[k][ky].data()) - oy) - sy * z;
+    };
+    float4 ax, ay, az, bx, by, bz, cx, cy, cz;
+    sheared(0, ax, ay, az);
+    sheared(1, bx, by, bz);
+    sheared(2, cx, cy, cz);
+
+    // Sign-exact edge functions; inside (edges included) when all share a sign.
+    float4 const eu = difference_of_products(cx, by, cy, bx);
+    float4 const ev = difference_of_products(ax, cy, ay, cx);
+    float4 const ew = difference_of_products(bx, ay, by, ax);
+    float4 const zero(0.0f);
+    auto const inside = simd::mask4::from_bits(b.testable) & (((eu >= zero) & (ev >= zero) & (ew >= zero)) | ((eu <= zero) & (ev <= zero) & (ew <= zero)));
+    if (simd::none(inside)) return h;
+
+    float4 const det = eu + ev + ew;
+    float4 const scaled_t = eu * (sz * az) + ev * (sz * bz) + ew * (sz * cz);
+    float4 const t = scaled_t / det;
+    auto const hit = inside & (det != zero) & (t >= float4(ray.tmin)) & (t <= float4(ray.tmax));
+    h.mask = simd::movemask(hit);
+    if (h.mask == 0) return h;
+    t.store(h.t.data());
+    ev.store(h.ev.data());
+    ew.store(h.ew.data());
+    det.store(h.det.data());
+    return h;
+}
+
+} // namespace canopy
