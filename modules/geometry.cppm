@@ -1,5 +1,5 @@
 // canopy.geometry — primitives and their ray tests, found by ADL as `intersect(ray, prim)`:
-// triangles (watertight by default, Möller–Trumbore opt-in; blocks of four tested at once), spheres, the conservative ray/box
+// triangles (watertight by default, Möller–Trumbore opt-in; blocks tested at once), spheres, the conservative ray/box
 // slab test, hit_record, and robust secondary-ray origins (spawn_ray). Every test works for float, double and SIMD packet rays.
 //
 // A user-defined primitive joins the library by providing, in its own namespace:

@@ -1249,6 +1249,20 @@ using mask4 = basic_mask<4>;
 using mask8 = basic_mask<8>;
 using mask16 = basic_mask<16>;
 
+// Whether N-lane vectors run on SIMD instructions in this build (false: the portable scalar
+// backend). Kernels choose their widths with it.
+template <int N>
+inline constexpr bool native_width =
+#if defined(CANOPY_SIMD_AVX512)
+    N == 4 || N == 8 || N == 16;
+#elif defined(CANOPY_SIMD_AVX2)
+    N == 4 || N == 8;
+#elif defined(CANOPY_SIMD_SSE42)
+    N == 4;
+#else
+    false;
+#endif
+
 }  // namespace canopy::simd
 
 namespace canopy::simd::detail {

@@ -243,7 +243,9 @@ void check_build_contract(std::vector<triangle> const& input, mesh_bvh const& b,
     CHECK(w.inner_bounds_ok);
     CHECK(w.levels == b.depth);
     CHECK(b.depth <= options.max_depth);
-    CHECK(w.max_leaf <= std::size_t(options.max_leaf_size));
+    // The default leaf size of triangle BVHs is one block of triangles.
+    int const max_leaf = options.max_leaf_size != 0 ? options.max_leaf_size : canopy::triangle_block_width;
+    CHECK(w.max_leaf <= std::size_t(max_leaf));
     CHECK(w.leaves * 2 - 1 == b.nodes.size());
     // The root box is the union of the primitives' boxes.
     canopy::aabb all;

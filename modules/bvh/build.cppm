@@ -29,7 +29,7 @@ import :wide;
 export namespace canopy {
 
 struct bvh_build_options {
-    int max_leaf_size = 4;                    // primitives per leaf (≥ 1)
+    int max_leaf_size = 0;                    // primitives per leaf; 0: triangle_block_width for triangle BVHs, else 4
     int bins = 16;                            // SAH bins per axis (2 … 256)
     int max_depth = bvh_max_depth;            // clamped to [1, bvh_max_depth]
     sah_costs costs = {};
@@ -245,6 +245,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     std::size_t const n = prims.size();
     if (n == 0) return result;
 
+    if (options.max_leaf_size == 0) options.max_leaf_size = stores_triangle_blocks_v<Prim> ? triangle_block_width : 4;
     options.max_leaf_size = std::max(options.max_leaf_size, 1);
     options.bins = std::clamp(options.bins, 2, 256);
     options.max_depth = std::clamp(options.max_depth, 1, bvh_max_depth);
