@@ -72,11 +72,16 @@ struct counting_intersector : basic_intersector<counting_intersector<Inner>> {
         return test_primitive(inner, ray, tri);
     }
 
+    template <typename Ray>
+        requires filter_hook_for<Inner, Ray>
+    bool filter(Ray const& ray, basic_hit_record<float> const& hr) {
+        return inner.filter(ray, hr);
+    }
+
     Inner inner;
     std::uint64_t boxes = 0;
     std::uint64_t triangles = 0;
 };
-
 
 struct ray_set {
     std::string name;

@@ -86,6 +86,7 @@ struct intersector_variant {
 constexpr auto intersector_variants = std::tuple{
     intersector_variant<canopy::default_intersector>{"", false},
     intersector_variant<canopy::bench_alpha_intersector>{" + alpha", true},
+    intersector_variant<canopy::bench_alpha_hook_intersector>{" + alpha (triangle hook)", true},
 };
 
 // ---- Embree -------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 // profile_rays — one scene, one ray set, one query, traced in one function, for profilers:
 // callgrind counts instructions per ray (bench/profile.sh), perf samples where the time goes.
 //
-//   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha] [--passes P]
+//   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow        QUERY  closest | any
 //
@@ -30,7 +30,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha] [--passes P]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]\n",
                  program);
     return 2;
 }
@@ -58,13 +58,14 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
 int main(int argc, char** argv) {
     if (argc < 4) return usage(argv[0]);
     std::string const scene_name = argv[1], set_name = argv[2], query = argv[3];
-    bool quick = false, alpha = false;
+    bool quick = false, alpha = false, alpha_hook = false;
     std::size_t count = 0;
     int passes = 1;
     for (int i = 4; i < argc; ++i) {
         std::string const a = argv[i];
         if (a == "--quick") quick = true;
         else if (a == "--alpha") alpha = true;
+        else if (a == "--alpha-hook") alpha_hook = true;
         else if (a == "--count" && i + 1 < argc) count = std::size_t(std::atoll(argv[++i]));
         else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
         else return usage(argv[0]);
@@ -86,8 +87,9 @@ int main(int argc, char** argv) {
         if (set.name != set_name) continue;
         if (count != 0 && count < set.rays.size()) set.rays.resize(count);
         bool const closest = query == "closest";
-        return alpha ? run<canopy::bench_alpha_intersector>(*s, set.rays, closest, passes)
-                     : run<canopy::default_intersector>(*s, set.rays, closest, passes);
+        if (alpha) return run<canopy::bench_alpha_intersector>(*s, set.rays, closest, passes);
+        if (alpha_hook) return run<canopy::bench_alpha_hook_intersector>(*s, set.rays, closest, passes);
+        return run<canopy::default_intersector>(*s, set.rays, closest, passes);
     }
     return usage(argv[0]);
 }

@@ -5,6 +5,8 @@
 //   2. a texture alpha mask: an intersector that looks up the tree texture's alpha at the hit's
 //      texture coordinates and rejects the hit where it is transparent (`hr.hit &= alpha >= .01f`),
 //   3. a procedural alpha mask: the same, with a rule computed from the texture coordinates,
+//      written as a filter (beyond the paper): called only for the candidates the library's own
+//      test found, so leaves keep their SIMD test, where a triangle hook is called per triangle,
 //   4. a BVH cost heat map: an intersector that counts every ray/box and ray/triangle test, at
 //      every level of the instanced scene.
 //
@@ -46,19 +48,15 @@ struct texture_alpha_mask : canopy::basic_intersector<texture_alpha_mask> {
     canopy::texture2d<vec4<float>> const* alpha = nullptr;
 };
 
-// A procedural alpha mask: concentric rings in texture space, cut off outside the unit disc.
+// A procedural alpha mask: concentric rings in texture space, cut off outside the unit disc. A
+// filter: it sees each candidate hit (t, u, v, ids, instance path) and keeps or drops it.
 struct procedural_alpha_mask : canopy::basic_intersector<procedural_alpha_mask> {
-    using canopy::basic_intersector<procedural_alpha_mask>::operator();
-
     template <typename Ray>
-    auto operator()(Ray const& ray, canopy::triangle const& tri) {
-        auto hr = intersect(ray, tri);
-        if (hr.hit && hr.geom_id == billboard_mesh) {
-            vec2<float> const uv = scene->uv(hr);
-            float const d = 2.0f * canopy::length(uv - vec2<float>(0.5f, 0.5f));
-            hr.hit &= d < 1.0f && 5.0f * d - std::floor(5.0f * d) < 0.6f;
-        }
-        return hr;
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) const {
+        if (hr.geom_id != billboard_mesh) return true;
+        vec2<float> const uv = scene->uv(hr);
+        float const d = 2.0f * canopy::length(uv - vec2<float>(0.5f, 0.5f));
+        return d < 1.0f && 5.0f * d - std::floor(5.0f * d) < 0.6f;
     }
 
     canopy::compiled_scene const* scene = nullptr;

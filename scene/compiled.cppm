@@ -251,34 +251,30 @@ struct compiled_scene {
 };
 
 // The paper's texture alpha mask: a candidate on a masked material is kept only where the
-// texture's alpha at the hit's texture coordinates reaches the cutoff.
+// texture's alpha at the hit's texture coordinates reaches the cutoff. Written as a filter
+// (canopy.intersector), so that leaves keep their SIMD test; `keeps` serves intersectors that
+// compose it with hooks of their own.
 struct texture_alpha_mask : basic_intersector<texture_alpha_mask> {
-    using basic_intersector<texture_alpha_mask>::operator();
-
     template <typename Ray>
-    auto operator()(Ray const& ray, triangle const& tri) {
-        auto hr = intersect(ray, tri);
-        if (hr.hit) {
-            material const& mat = scene->material_of(hr);
-            if (mat.alpha_mask && mat.texture >= 0)
-                hr.hit &= tex2D(scene->textures[std::size_t(mat.texture)], scene->uv(hr)).w >= mat.alpha_cutoff;
-        }
-        return hr;
+    bool filter(Ray const&, basic_hit_record<float> const& hr) const {
+        return keeps(hr);
+    }
+
+    bool keeps(basic_hit_record<float> const& hr) const {
+        material const& mat = scene->material_of(hr);
+        return !(mat.alpha_mask && mat.texture >= 0) ||
+               tex2D(scene->textures[std::size_t(mat.texture)], scene->uv(hr)).w >= mat.alpha_cutoff;
     }
 
     compiled_scene const* scene = nullptr;
 };
 
 // A procedural alpha mask on masked materials: concentric rings around the centre of texture
-// space, cut off outside the unit disc.
+// space, cut off outside the unit disc. A filter, as above.
 struct procedural_alpha_mask : basic_intersector<procedural_alpha_mask> {
-    using basic_intersector<procedural_alpha_mask>::operator();
-
     template <typename Ray>
-    auto operator()(Ray const& ray, triangle const& tri) {
-        auto hr = intersect(ray, tri);
-        if (hr.hit && scene->material_of(hr).alpha_mask) hr.hit &= keeps(scene->uv(hr));
-        return hr;
+    bool filter(Ray const&, basic_hit_record<float> const& hr) const {
+        return !scene->material_of(hr).alpha_mask || keeps(scene->uv(hr));
     }
 
     // The rule: with d = 2·|uv − (0.5, 0.5)|, keep where d < 1 and frac(5d) < 0.6.

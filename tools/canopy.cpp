@@ -330,7 +330,12 @@ struct masked_costs : canopy::basic_intersector<masked_costs> {
     template <typename Ray>
     auto operator()(Ray const& ray, canopy::triangle const& tri) {
         ++num_tris;
-        return mask(ray, tri);
+        return intersect(ray, tri);
+    }
+
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) const {
+        return mask.keeps(hr);
     }
 
     canopy::texture_alpha_mask mask;

@@ -60,21 +60,31 @@ struct bench_hit {
 };
 
 // The alpha rule of the formats (`--intersector alpha`): on every candidate hit, clamp u and v to
-// [0, 1] and reject the candidate when floor(8u) + floor(8v) is odd; traversal goes on.
+// [0, 1] and reject the candidate when floor(8u) + floor(8v) is odd; traversal goes on. A filter
+// (canopy.intersector): the library keeps its SIMD leaf test and asks only about candidates.
 struct bench_alpha_intersector : basic_intersector<bench_alpha_intersector> {
-    using basic_intersector<bench_alpha_intersector>::operator();
-
     template <typename Ray>
-    auto operator()(Ray const& ray, triangle const& tri) {
-        auto hr = intersect(ray, tri);
-        if (hr.hit) hr.hit = !rejects(hr.u, hr.v);
-        return hr;
+    bool filter(Ray const&, basic_hit_record<float> const& hr) const {
+        return !rejects(hr.u, hr.v);
     }
 
     static bool rejects(float u, float v) {
         int const cu = int(std::floor(8.0f * std::clamp(u, 0.0f, 1.0f)));
         int const cv = int(std::floor(8.0f * std::clamp(v, 0.0f, 1.0f)));
         return ((cu + cv) & 1) != 0;
+    }
+};
+
+// The same rule written as the paper writes intersectors: a triangle hook, which the library
+// calls once per triangle (leaves are then tested one triangle at a time). Same hits.
+struct bench_alpha_hook_intersector : basic_intersector<bench_alpha_hook_intersector> {
+    using basic_intersector<bench_alpha_hook_intersector>::operator();
+
+    template <typename Ray>
+    auto operator()(Ray const& ray, triangle const& tri) {
+        auto hr = intersect(ray, tri);
+        if (hr.hit) hr.hit = !bench_alpha_intersector::rejects(hr.u, hr.v);
+        return hr;
     }
 };
 
