@@ -50,6 +50,23 @@ bool same_vertices(triangle const& a, triangle const& b) {
     return eq(a.v0, b.v0) && eq(a.v1, b.v1) && eq(a.v2, b.v2);
 }
 
+// The primitives of one leaf (a binary node or a wide-node slot: index, count), each with a key
+// that names it once in the whole BVH: its position in `primitives`, or, for triangle BVHs, whose
+// triangles live in blocks, its prim_id (the builder numbers them 0 … n-1). Returns false when
+// the leaf points outside the storage.
+template <typename Prim, typename F>
+bool visit_leaf(canopy::bvh<Prim> const& b, std::uint32_t index, std::uint32_t count, F&& f) {
+    if constexpr (canopy::stores_triangle_blocks_v<Prim>) {
+        std::size_t const blocks = (count + canopy::triangle_block_width - 1) / canopy::triangle_block_width;
+        if (std::size_t(index) + blocks > b.blocks.size()) return false;
+        canopy::for_each_leaf_primitive(b, index, count, [&](Prim const& p) { f(std::size_t(p.prim_id), p); });
+    } else {
+        if (std::size_t(index) + count > b.primitives.size()) return false;
+        for (std::uint32_t i = index; i < index + count; ++i) f(std::size_t(i), b.primitives[i]);
+    }
+    return true;
+}
+
 // What an independent walk from the root finds.
 struct walk_result {
     std::size_t nodes_reached = 0;
@@ -66,7 +83,7 @@ struct walk_result {
 template <typename Prim>
 walk_result walk(canopy::bvh<Prim> const& b, canopy::sah_costs costs = {}) {
     walk_result w;
-    w.primitive_owners.assign(b.primitives.size(), 0);
+    w.primitive_owners.assign(b.primitive_count(), 0);
     if (b.nodes.empty()) return w;
     std::vector<int> reached(b.nodes.size(), 0);
     double const root_area = double(surface_area(b.nodes[0].bounds));
@@ -90,14 +107,15 @@ walk_result walk(canopy::bvh<Prim> const& b, canopy::sah_costs costs = {}) {
             ++w.leaves;
             w.max_leaf = std::max<std::size_t>(w.max_leaf, node.count);
             w.sah_cost += rel * double(costs.intersection) * double(node.count);
-            if (std::size_t(node.index) + node.count > b.primitives.size()) {
-                w.structure_ok = false;
-                continue;
-            }
-            for (std::uint32_t i = node.index; i < node.index + node.count; ++i) {
-                ++w.primitive_owners[i];
-                w.leaf_bounds_ok = w.leaf_bounds_ok && box_contains(node.bounds, get_bounds(b.primitives[i]));
-            }
+            bool const in_range = visit_leaf(b, node.index, node.count, [&](std::size_t key, Prim const& p) {
+                if (key >= w.primitive_owners.size()) {
+                    w.structure_ok = false;
+                    return;
+                }
+                ++w.primitive_owners[key];
+                w.leaf_bounds_ok = w.leaf_bounds_ok && box_contains(node.bounds, get_bounds(p));
+            });
+            if (!in_range) w.structure_ok = false;
         } else {
             w.sah_cost += rel * double(costs.traversal);
             if (std::size_t(node.index) + 1 >= b.nodes.size()) {
@@ -129,20 +147,6 @@ wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
     wide_walk_result w;
     w.primitive_owners.assign(b.primitive_count(), 0);
     if (b.wide_nodes.empty()) return w;
-    // A leaf primitive's position in `primitives` (leaf order): its address there, or, for the
-    // copies in triangle blocks, the position of the triangle with its prim_id.
-    std::vector<std::size_t> by_prim_id;
-    if constexpr (canopy::stores_triangle_blocks_v<Prim>) {
-        by_prim_id.assign(b.primitives.size(), b.primitives.size());
-        for (std::size_t i = 0; i < b.primitives.size(); ++i)
-            if (b.primitives[i].prim_id < by_prim_id.size()) by_prim_id[b.primitives[i].prim_id] = i;
-    }
-    auto const position = [&](Prim const& p) -> std::size_t {
-        if constexpr (canopy::stores_triangle_blocks_v<Prim>)
-            return p.prim_id < by_prim_id.size() ? by_prim_id[p.prim_id] : b.primitives.size();
-        else
-            return std::size_t(&p - b.primitives.data());
-    };
     std::vector<int> reached(b.wide_nodes.size(), 0);
     struct item {
         std::uint32_t node;
@@ -171,25 +175,15 @@ wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
             }
             w.structure_ok = w.structure_ok && !seen_unused;
             if (node.count[k] > 0) {
-                std::size_t const stored = canopy::stores_triangle_blocks_v<Prim>
-                                               ? b.blocks.size() * canopy::triangle_block_width
-                                               : b.primitives.size();
-                std::size_t const per_slot = canopy::stores_triangle_blocks_v<Prim> ? canopy::triangle_block_width : 1;
-                if (std::size_t(node.child[k]) * per_slot + node.count[k] > stored) {
-                    w.structure_ok = false;
-                    continue;
-                }
-                canopy::for_each_leaf_primitive(b, node.child[k], node.count[k], [&](Prim const& p) {
-                    std::size_t const i = position(p);
-                    if (i >= b.primitives.size()) {
+                bool const in_range = visit_leaf(b, node.child[k], node.count[k], [&](std::size_t key, Prim const& p) {
+                    if (key >= w.primitive_owners.size()) {
                         w.structure_ok = false;
                         return;
                     }
-                    if constexpr (canopy::stores_triangle_blocks_v<Prim>)  // the same bits, NaN included
-                        w.structure_ok = w.structure_ok && std::memcmp(&p, &b.primitives[i], sizeof(Prim)) == 0;
-                    ++w.primitive_owners[i];
+                    ++w.primitive_owners[key];
                     w.bounds_ok = w.bounds_ok && box_contains(box, get_bounds(p));
                 });
+                if (!in_range) w.structure_ok = false;
             } else {
                 if (node.child[k] >= b.wide_nodes.size()) {
                     w.structure_ok = false;
@@ -220,18 +214,18 @@ void check_wide_tree(canopy::bvh<Prim> const& b) {
 
 // The full builder contract for an input whose centroids are distinct.
 void check_build_contract(std::vector<triangle> const& input, mesh_bvh const& b, canopy::bvh_build_options const& options) {
-    REQUIRE(b.primitives.size() == input.size());
+    REQUIRE(b.primitive_count() == input.size());
     // prim_id = index in the input; each input primitive appears exactly once, unchanged.
     std::vector<int> seen(input.size(), 0);
     bool ids_ok = true;
-    for (auto const& p : b.primitives) {
+    canopy::for_each_primitive(b, [&](triangle const& p) {
         if (p.prim_id >= input.size()) {
             ids_ok = false;
-            continue;
+            return;
         }
         ++seen[p.prim_id];
         ids_ok = ids_ok && same_vertices(p, input[p.prim_id]) && p.geom_id == input[p.prim_id].geom_id;
-    }
+    });
     CHECK(ids_ok);
     CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
 
@@ -309,7 +303,8 @@ TEST_CASE("an empty input gives an empty BVH, and queries on it miss") {
     CHECK(b.empty());
     CHECK(b.nodes.empty());
     CHECK(b.wide_nodes.empty());
-    CHECK(b.primitives.empty());
+    CHECK(b.primitive_count() == 0);
+    CHECK(b.blocks.empty());
     CHECK(canopy::is_empty(b.bounds()));
     auto const s = canopy::compute_stats(b);
     CHECK(s.node_count == 0);
@@ -348,7 +343,7 @@ TEST_CASE("compute_stats is consistent with the tree") {
         CHECK(s.max_leaf_size <= std::size_t(leaf));
         CHECK(s.wide_node_count == b.wide_nodes.size());
         CHECK(s.bytes == b.nodes.size() * sizeof(mesh_bvh::node_type) +
-                             b.wide_nodes.size() * sizeof(canopy::wide_bvh_node<float>) + soup.size() * sizeof(triangle) +
+                             b.wide_nodes.size() * sizeof(canopy::wide_bvh_node<float>) +
                              b.blocks.size() * sizeof(canopy::triangle_block));
         CHECK(s.bytes_per_primitive == Approx(double(s.bytes) / double(soup.size())));
         CHECK(s.sah_cost == Approx(w.sah_cost).epsilon(1e-9));
@@ -362,7 +357,7 @@ TEST_CASE("compute_stats is consistent with the tree") {
     CHECK(s.node_count == 1);
     CHECK(s.leaf_count == 1);
     CHECK(s.depth == 1);
-    CHECK(single.primitives[0].prim_id == 0u);
+    CHECK(single.blocks[0].prim_id[0] == 0u);
 }
 
 TEST_CASE("coincident centroids build without crashing and split by index") {
@@ -376,7 +371,7 @@ TEST_CASE("coincident centroids build without crashing and split by index") {
     CHECK(b.depth <= canopy::bvh_max_depth);
     check_wide_tree(b);
     std::vector<int> seen(copies.size(), 0);
-    for (auto const& p : b.primitives) ++seen[p.prim_id];
+    canopy::for_each_primitive(b, [&](triangle const& p) { ++seen[p.prim_id]; });
     CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
     // All copies are hit at the same t: the smallest prim_id wins, multi_hit lists them in order.
     ray const r{{0.25f, 0.25f, 3}, 0, {0, 0, -1}, inf};
@@ -409,7 +404,7 @@ TEST_CASE("non-finite vertices do not crash the builder") {
     CHECK(ww.structure_ok);
     CHECK(std::all_of(ww.primitive_owners.begin(), ww.primitive_owners.end(), [](int n) { return n == 1; }));
     std::vector<int> seen(soup.size(), 0);
-    for (auto const& p : b.primitives) ++seen[p.prim_id];
+    canopy::for_each_primitive(b, [&](triangle const& p) { ++seen[p.prim_id]; });
     CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
 }
 

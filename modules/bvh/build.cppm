@@ -280,6 +280,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
                 result.primitives[i].prim_id = ctx.order[i];
         }
     });
+    result.size = n;
     if constexpr (stores_triangle_blocks_v<Prim>) pack_triangle_blocks(result);
     return result;
 }

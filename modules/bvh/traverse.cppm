@@ -217,9 +217,10 @@ struct traversal_stack {
 };
 
 // The hit children of `node` in visiting order: returns the first to visit and pushes the
-// others so that they pop in order. Near to far when the query wants it (closest, multi hit;
-// as Embree's traverseClosestHit: one and two children without sorting, more by insertion
-// sort); else in slot order (any hit: every hit child is visited until one primitive is hit).
+// others so that they pop in order. Near to far when the query wants it (closest, multi hit; as
+// Embree's traverseClosestHit: one and two children without sorting, more sorted by insertion
+// straight into the stack, farthest deepest); else in slot order (any hit: every hit child is
+// visited until one primitive is hit).
 template <bool near_first, typename S>
 [[gnu::always_inline]] inline traversal_entry<S> order_children(wide_bvh_node<S> const& node, child_hits<S> const& hits,
                                                                 traversal_stack<S>& stack) {
@@ -240,16 +241,16 @@ template <bool near_first, typename S>
             stack.push(two_first ? one : two);
             return two_first ? two : one;
         }
-        std::array<traversal_entry<S>, bvh_width> order;
-        int n = 0;
-        for (std::uint32_t m = hits.mask; m != 0; m &= m - 1) {
-            auto const e = entry(std::uint32_t(std::countr_zero(m)));
-            int j = n++;
-            for (; j > 0 && e.tnear < order[std::size_t(j - 1)].tnear; --j) order[std::size_t(j)] = order[std::size_t(j - 1)];
-            order[std::size_t(j)] = e;
+        int const base = stack.size;
+        auto* const e = stack.entries.data();
+        e[stack.size++] = one;
+        for (; rest != 0; rest &= rest - 1) {
+            auto const next = entry(std::uint32_t(std::countr_zero(rest)));
+            int j = stack.size++;
+            for (; j > base && e[j - 1].tnear < next.tnear; --j) e[j] = e[j - 1];
+            e[j] = next;
         }
-        for (int j = n - 1; j > 0; --j) stack.push(order[std::size_t(j)]);
-        return order[0];
+        return e[--stack.size];
     }
 }
 

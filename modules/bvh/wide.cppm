@@ -9,6 +9,7 @@ module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
 // every path (scalar, SIMD, packet) rounds the same way.
 #pragma STDC FP_CONTRACT OFF
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -88,20 +89,36 @@ std::vector<wide_bvh_node<S>> collapse_to_wide(std::vector<bvh_node<S>> const& n
     return wide;
 }
 
-// Copies the leaves' triangles of a triangle BVH into blocks of four, leaf by leaf in the order
-// of the wide nodes, and points the wide nodes' leaf slots at the blocks (count unchanged).
+// Moves the leaves' triangles of a triangle BVH (in `primitives`, leaf order) into blocks, leaf by
+// leaf in leaf order, and points the binary and wide leaves at their first block (count
+// unchanged); `primitives` is left empty.
 template <typename Prim>
     requires stores_triangle_blocks_v<Prim>
 void pack_triangle_blocks(bvh<Prim>& b) {
     b.blocks.clear();
+    std::vector<std::uint32_t> first_block(b.primitives.size(), invalid_id); // by a leaf's first primitive
+    std::vector<std::uint32_t> leaf_starts;
+    for (auto const& n : b.nodes)
+        if (n.is_leaf()) leaf_starts.push_back(n.index);
+    std::sort(leaf_starts.begin(), leaf_starts.end());
+    std::size_t blocks = 0;
+    for (std::size_t k = 0; k < leaf_starts.size(); ++k) {
+        std::size_t const end = k + 1 < leaf_starts.size() ? leaf_starts[k + 1] : b.primitives.size();
+        blocks += (end - leaf_starts[k] + triangle_block_width - 1) / triangle_block_width;
+    }
+    b.blocks.reserve(blocks);
+    for (std::size_t k = 0; k < leaf_starts.size(); ++k) {
+        std::size_t const end = k + 1 < leaf_starts.size() ? leaf_starts[k + 1] : b.primitives.size();
+        first_block[leaf_starts[k]] = std::uint32_t(b.blocks.size());
+        append_triangle_blocks(b.blocks, b.primitives.begin() + std::ptrdiff_t(leaf_starts[k]),
+                               b.primitives.begin() + std::ptrdiff_t(end));
+    }
+    for (auto& n : b.nodes)
+        if (n.is_leaf()) n.index = first_block[n.index];
     for (auto& node : b.wide_nodes)
-        for (std::size_t k = 0; k < std::size_t(bvh_width); ++k) {
-            if (node.count[k] == 0) continue;
-            auto const first = b.primitives.begin() + std::ptrdiff_t(node.child[k]);
-            auto const block = std::uint32_t(b.blocks.size());
-            append_triangle_blocks(b.blocks, first, first + std::ptrdiff_t(node.count[k]));
-            node.child[k] = block;
-        }
+        for (std::size_t k = 0; k < std::size_t(bvh_width); ++k)
+            if (node.count[k] != 0) node.child[k] = first_block[node.child[k]];
+    b.primitives = {};
 }
 
 } // namespace canopy
