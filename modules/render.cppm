@@ -51,7 +51,7 @@ struct pinhole_camera {
     }
 
     // Ray through image position (px, py) in pixels, (0, 0) the top-left corner of the image.
-    ray primary_ray(float px, float py, int width, int height) const {
+    inline ray primary_ray(float px, float py, int width, int height) const {
         float const sx = 2.0f * px / float(width) - 1.0f;
         float const sy = 1.0f - 2.0f * py / float(height);
         return {eye, 0.0f, forward + right * sx + up * sy, std::numeric_limits<float>::infinity()};
@@ -80,12 +80,12 @@ struct pixel_random {
         : state(hash(seed ^ hash(std::uint32_t(x) ^ hash(std::uint32_t(y) ^ hash(std::uint32_t(sample)))))) {}
 
     // Uniform in [0, 1).
-    float next() {
+    inline float next() {
         state = hash(state + 0x9e3779b9u);
         return float(state >> 8) * 0x1p-24f;
     }
 
-    static std::uint32_t hash(std::uint32_t x) {
+    static inline std::uint32_t hash(std::uint32_t x) {
         // Wellons' lowbias32.
         x ^= x >> 16;
         x *= 0x7feb352du;

@@ -208,14 +208,14 @@ struct compiled_scene {
     }
 
     // Texture coordinates at a hit (hooks may call this: it needs only geom_id, prim_id, u, v).
-    vec2<float> uv(basic_hit_record<float> const& hr) const {
+    inline vec2<float> uv(basic_hit_record<float> const& hr) const {
         auto const& mesh = meshes[hr.geom_id];
         if (mesh.uvs.empty()) return {hr.u, hr.v};
         auto const& t = mesh.uvs[hr.prim_id];
         return lerp(t[0], t[1], t[2], hr.u, hr.v);
     }
 
-    material const& material_of(basic_hit_record<float> const& hr) const {
+    inline material const& material_of(basic_hit_record<float> const& hr) const {
         return materials[std::size_t(meshes[hr.geom_id].material)];
     }
 
@@ -260,7 +260,7 @@ struct texture_alpha_mask : basic_intersector<texture_alpha_mask> {
         return keeps(hr);
     }
 
-    bool keeps(basic_hit_record<float> const& hr) const {
+    inline bool keeps(basic_hit_record<float> const& hr) const {
         material const& mat = scene->material_of(hr);
         return !(mat.alpha_mask && mat.texture >= 0) ||
                tex2D(scene->textures[std::size_t(mat.texture)], scene->uv(hr)).w >= mat.alpha_cutoff;
@@ -278,7 +278,7 @@ struct procedural_alpha_mask : basic_intersector<procedural_alpha_mask> {
     }
 
     // The rule: with d = 2·|uv − (0.5, 0.5)|, keep where d < 1 and frac(5d) < 0.6.
-    static bool keeps(vec2<float> uv) {
+    static inline bool keeps(vec2<float> uv) {
         float const d = 2.0f * length(uv - vec2<float>(0.5f, 0.5f));
         float const ring = 5.0f * d - std::floor(5.0f * d);
         return d < 1.0f && ring < 0.6f;

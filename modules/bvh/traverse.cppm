@@ -46,7 +46,9 @@ struct child_hits {
 // and inverse direction in every lane, and which plane row is near and which far on each axis
 // (by the sign of the inverse direction, Ize 2013's ordered slabs: no select per node).
 struct wide_box_ray {
-    [[gnu::always_inline]] explicit wide_box_ray(prepared_ray<float> const& ray) {
+    // Member functions of a class in a named module are not implicitly inline: say so, or
+    // importers call them instead of inlining them.
+    [[gnu::always_inline]] inline explicit wide_box_ray(prepared_ray<float> const& ray) {
         for (int a = 0; a < 3; ++a) {
             auto const k = std::size_t(a);
             origin[k] = simd::float8(ray.origin[a]);
@@ -60,7 +62,7 @@ struct wide_box_ray {
         set_tmax(ray.tmax);
     }
 
-    [[gnu::always_inline]] void set_tmax(float ray_tmax) {
+    [[gnu::always_inline]] inline void set_tmax(float ray_tmax) {
         box_tmax = box_test_tmax(ray_tmax);
         box_tmax8 = simd::float8(box_tmax);
     }
@@ -276,9 +278,11 @@ template <typename T, typename Prim, typename I, typename Query>
 // Traverses b with a prepared ray; returns true when the query asked to stop (any-hit found,
 // packet finished). ray.tmax is tightened as the query allows.
 template <typename T, typename Prim, typename I, typename Query>
-bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
+[[gnu::always_inline]] inline bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
     using S = typename bvh<Prim>::value_type;
     if (b.wide_nodes.empty()) return false;
+    if constexpr (!acceleration_structure<Prim>)
+        if (!ray.has_shear) ray.prepare_shear();
     detail::node_tester<T, S, I> nodes(ray, isect);
     detail::traversal_stack<S> stack;
     detail::traversal_entry<S> current{0, 0, S(0)};
@@ -299,10 +303,11 @@ bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) 
     }
 }
 
-// Traverses b with a plain ray (prepared here, once); ray.tmax is tightened as the query allows.
+// Traverses b with a plain ray (prepared here, once: the triangle shear only if b holds
+// primitives); ray.tmax is tightened as the query allows.
 template <typename T, typename Prim, typename I, typename Query>
-bool traverse(basic_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
-    prepared_ray<T> prepared(ray);
+[[gnu::always_inline]] inline bool traverse(basic_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
+    prepared_ray<T> prepared(ray, !acceleration_structure<Prim>);
     bool const stop = traverse(prepared, b, isect, query);
     ray.tmax = prepared.tmax;
     return stop;

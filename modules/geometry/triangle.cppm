@@ -113,22 +113,31 @@ watertight_shear<T> make_watertight_shear(vec3<T> const& dir) {
     return s;
 }
 
-// A ray with its per-ray constants computed once: the watertight shear (with the origin in the
-// shear's axis order) and the inverse direction of the box test. Traversal hands these to hooks
-// as their `Ray`; since it derives from basic_ray, hooks read origin/direction/tmin/tmax as usual
-// and `intersect(ray, tri)` inside a hook picks up the cached shear. Results are bit-identical to
-// a plain basic_ray.
+// A ray with its per-ray constants computed once: the inverse direction of the box test and the
+// watertight shear (with the origin in the shear's axis order). Traversal hands these to hooks as
+// their `Ray`; since it derives from basic_ray, hooks read origin/direction/tmin/tmax as usual and
+// `intersect(ray, tri)` inside a hook picks up the cached shear. Results are bit-identical to a
+// plain basic_ray. The shear is computed only where primitives are tested (canopy.bvh prepares it
+// on entering a BVH of primitives, not for BVHs of instances or of BVHs): has_shear says whether
+// it is there.
 template <typename T>
 struct prepared_ray : basic_ray<T> {
     prepared_ray() = default;
-    explicit prepared_ray(basic_ray<T> const& r)
-        : basic_ray<T>(r), shear(make_watertight_shear(r.direction)),
-          inv_dir(simd::rcp(r.direction.x), simd::rcp(r.direction.y), simd::rcp(r.direction.z)),
-          permuted_origin(shear.permute(r.origin)) {}
+    explicit prepared_ray(basic_ray<T> const& r, bool with_shear = true)
+        : basic_ray<T>(r), inv_dir(simd::rcp(r.direction.x), simd::rcp(r.direction.y), simd::rcp(r.direction.z)) {
+        if (with_shear) prepare_shear();
+    }
+
+    void prepare_shear() {
+        shear = make_watertight_shear(this->direction);
+        permuted_origin = shear.permute(this->origin);
+        has_shear = true;
+    }
 
     watertight_shear<T> shear;
     vec3<T> inv_dir;
     vec3<T> permuted_origin;
+    bool has_shear = false;
 };
 
 template <typename Ray>

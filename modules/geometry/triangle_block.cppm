@@ -47,13 +47,14 @@ struct alignas(64) triangle_block {
     std::array<std::uint32_t, triangle_block_width> geom_id;
     std::uint32_t testable = 0; // bit i: lane i holds a triangle that is not degenerate
 
-    [[gnu::always_inline]] triangle triangle_at(int lane) const {
+    // (inline: member functions in a named module are not implicitly inline.)
+    [[gnu::always_inline]] inline triangle triangle_at(int lane) const {
         auto const l = std::size_t(lane);
         auto const v = [&](std::size_t k) { return vec3<float>(vertex[k][0][l], vertex[k][1][l], vertex[k][2][l]); };
         return {v(0), v(1), v(2), prim_id[l], geom_id[l]};
     }
 
-    void set(int lane, triangle const& t) {
+    inline void set(int lane, triangle const& t) {
         auto const l = std::size_t(lane);
         vec3<float> const v[3] = {t.v0, t.v1, t.v2};
         for (std::size_t k = 0; k < 3; ++k)
@@ -89,7 +90,7 @@ struct triangle_block_hits {
     std::array<float, triangle_block_width> t, ev, ew, det;
 
     // The record of lane i as intersect(ray, triangle) returns it for that triangle.
-    [[gnu::always_inline]] basic_hit_record<float> record(triangle_block const& b, int i) const {
+    [[gnu::always_inline]] inline basic_hit_record<float> record(triangle_block const& b, int i) const {
         auto const l = std::size_t(i);
         basic_hit_record<float> hr;
         record_hit(hr, true, t[l], ev[l] / det[l], ew[l] / det[l], b.prim_id[l], b.geom_id[l]);

@@ -68,7 +68,7 @@ struct bench_alpha_intersector : basic_intersector<bench_alpha_intersector> {
         return !rejects(hr.u, hr.v);
     }
 
-    static bool rejects(float u, float v) {
+    static inline bool rejects(float u, float v) {
         int const cu = int(std::floor(8.0f * std::clamp(u, 0.0f, 1.0f)));
         int const cv = int(std::floor(8.0f * std::clamp(v, 0.0f, 1.0f)));
         return ((cu + cv) & 1) != 0;
