@@ -28,23 +28,6 @@ export namespace canopy {
 
 namespace detail {
 
-// Ids of the instances entered on the way down; copied into accepted hit records.
-struct instance_path {
-    std::array<std::uint32_t, max_instance_depth> ids{};
-    int depth = 0;
-
-    void enter_instance(std::uint32_t id) { ids[std::size_t(depth++)] = id; }
-    void leave_instance() { --depth; }
-
-    template <typename T>
-    void stamp(basic_hit_record<T>& hr) const {
-        using index_t = index_type_t<T>;
-        hr.inst_id = depth > 0 ? index_t(ids[0]) : index_t(invalid_id);
-        for (int k = 1; k < max_instance_depth; ++k)
-            hr.inner_inst_id[std::size_t(k - 1)] = k < depth ? index_t(ids[std::size_t(k)]) : index_t(invalid_id);
-    }
-};
-
 // Unsigned a < b, lane-wise, for ids held in signed SIMD int lanes.
 template <typename I>
 auto id_less(I const& a, I const& b) {

@@ -378,3 +378,64 @@ TEST_CASE("the intersector concepts detect the hooks an intersector provides") {
     STATIC_REQUIRE(canopy::primitive_hook_for<canopy::moller_trumbore_intersector, ray, triangle>);
     STATIC_REQUIRE_FALSE(canopy::primitive_hook_for<canopy::moller_trumbore_intersector, ray, canopy::sphere>);
 }
+
+// Records, for every triangle its hook is called for, the instance path the hook sees, and
+// checks it against the triangle: under instance 10 + k the triangle must be one of soup k % 2.
+struct path_checker : canopy::basic_intersector<path_checker> {
+    using canopy::basic_intersector<path_checker>::operator();
+
+    template <typename Ray>
+    auto operator()(Ray const& ray, triangle const& tri) {
+        auto const ids = canopy::instance_ids(ray);
+        ++calls;
+        bool ok = ids.size() == 2 && ids[0] >= 100 && ids[0] < 103 && ids[1] >= 10 && ids[1] < 18;
+        if (ok) {
+            auto const& soup = scene->soups[(ids[1] - 10) % 2];
+            ok = tri.prim_id < soup.size() && tri.v0.x == soup[tri.prim_id].v0.x && tri.v1.y == soup[tri.prim_id].v1.y &&
+                 tri.v2.z == soup[tri.prim_id].v2.z;
+        }
+        wrong += ok ? 0 : 1;
+        return intersect(ray, tri);
+    }
+
+    // The filter sees the same path in the candidate's ids.
+    template <typename Ray>
+    bool filter(Ray const& ray, canopy::basic_hit_record<float> const& hr) {
+        auto const ids = canopy::instance_ids(ray);
+        ++filtered;
+        wrong += ids.size() == 2 && hr.inst_id == ids[0] && hr.inner_inst_id[0] == ids[1] &&
+                         hr.inner_inst_id[1] == canopy::invalid_id
+                     ? 0
+                     : 1;
+        return true;
+    }
+
+    test_support::nested_scene const* scene = nullptr;
+    int calls = 0, filtered = 0, wrong = 0;
+};
+
+TEST_CASE("hooks and filters see the instance path they run in, at every level") {
+    test_support::nested_scene const s(91);
+    random_source rng(92);
+    auto const rays = random_rays(rng, s.top.bounds(), 300);
+    path_checker check;
+    check.scene = &s;
+    int hits = 0;
+    for (auto const& r : rays) {
+        auto const hr = canopy::closest_hit(r, &s.top, &s.top + 1, check);
+        hits += hr.hit ? 1 : 0;
+        // The accepted hit's ids are the path of its triangle.
+        if (hr.hit) CHECK((hr.inst_id >= 100 && hr.inst_id < 103 && hr.inner_inst_id[0] >= 10 && hr.inner_inst_id[0] < 18));
+    }
+    CHECK(check.wrong == 0);
+    CHECK(check.calls > 1000);
+    CHECK(check.filtered >= hits);
+    CHECK(hits > 50);
+    // Outside traversal (a plain range of triangles) the path is empty.
+    auto const& soup = s.soups[0];
+    path_checker plain;
+    plain.scene = &s;
+    for (auto const& r : rays) (void)canopy::closest_hit(r, soup.begin(), soup.end(), plain);
+    CHECK(plain.calls == int(rays.size() * soup.size()));
+    CHECK(plain.wrong == plain.calls + plain.filtered);
+}

@@ -283,6 +283,7 @@ template <typename T, typename Prim, typename I, typename Query>
     if (b.wide_nodes.empty()) return false;
     if constexpr (!acceleration_structure<Prim>)
         if (!ray.has_shear) ray.prepare_shear();
+    if constexpr (std::is_base_of_v<instance_path, Query>) ray.instances = &query;
     detail::node_tester<T, S, I> nodes(ray, isect);
     detail::traversal_stack<S> stack;
     detail::traversal_entry<S> current{0, 0, S(0)};

@@ -53,6 +53,24 @@ using ray_value_t = std::remove_cvref_t<decltype(std::declval<Ray const&>().tmin
 template <typename Ray, typename Prim>
 using hit_record = basic_hit_record<ray_value_t<Ray>>;
 
+// The ids of the instances a traversal has entered, outermost first: queries keep one and copy
+// it into the hit records they accept; hooks read the current one through instance_ids(ray).
+struct instance_path {
+    std::array<std::uint32_t, max_instance_depth> ids{};
+    int depth = 0;
+
+    void enter_instance(std::uint32_t id) { ids[std::size_t(depth++)] = id; }
+    void leave_instance() { --depth; }
+
+    template <typename T>
+    void stamp(basic_hit_record<T>& hr) const {
+        using index_t = index_type_t<T>;
+        hr.inst_id = depth > 0 ? index_t(ids[0]) : index_t(invalid_id);
+        for (int k = 1; k < max_instance_depth; ++k)
+            hr.inner_inst_id[std::size_t(k - 1)] = k < depth ? index_t(ids[std::size_t(k)]) : index_t(invalid_id);
+    }
+};
+
 // Writes a hit into the lanes of hr where `hit` is set (for scalar rays: hit is true).
 template <typename T>
 [[gnu::always_inline]] inline void record_hit(basic_hit_record<T>& hr, simd::mask_type_t<T> const& hit, T t,

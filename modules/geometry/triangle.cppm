@@ -22,6 +22,7 @@ module;
 #pragma STDC FP_CONTRACT OFF
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <type_traits>
 #include <utility>
 export module canopy.geometry:triangle;
@@ -119,7 +120,7 @@ watertight_shear<T> make_watertight_shear(vec3<T> const& dir) {
 // `intersect(ray, tri)` inside a hook picks up the cached shear. Results are bit-identical to a
 // plain basic_ray. The shear is computed only where primitives are tested (canopy.bvh prepares it
 // on entering a BVH of primitives, not for BVHs of instances or of BVHs): has_shear says whether
-// it is there.
+// it is there. `instances` points to the traversal's instance path (see instance_ids).
 template <typename T>
 struct prepared_ray : basic_ray<T> {
     prepared_ray() = default;
@@ -138,12 +139,25 @@ struct prepared_ray : basic_ray<T> {
     vec3<T> inv_dir;
     vec3<T> permuted_origin;
     bool has_shear = false;
+    instance_path const* instances = nullptr;
 };
 
 template <typename Ray>
 inline constexpr bool is_prepared_ray_v = false;
 template <typename T>
 inline constexpr bool is_prepared_ray_v<prepared_ray<T>> = true;
+
+// The ids of the instances the traversal is inside when a hook receives `ray`, outermost first
+// (empty outside instances, and for rays that traversal did not prepare: tests over a plain
+// range of primitives). Filters read the same ids from the hit record (inst_id, inner_inst_id).
+template <typename Ray>
+std::span<std::uint32_t const> instance_ids(Ray const& ray) {
+    if constexpr (is_prepared_ray_v<Ray>) {
+        if (ray.instances != nullptr)
+            return std::span<std::uint32_t const>(ray.instances->ids.data(), std::size_t(ray.instances->depth));
+    }
+    return {};
+}
 
 // Woop et al.'s test for a ray whose shear is already known.
 template <typename T, typename S>
