@@ -258,9 +258,13 @@ template <bool near_first, typename S>
 
 // The primitives of one leaf through call_hooks_or_descend: blocks of four triangles for triangle
 // BVHs, else one primitive at a time. True when the query is finished.
+// The ray's triangle shear is prepared at its first leaf: rays that reach none (misses, and every
+// ray of BVHs of instances or of BVHs) never compute it.
 template <typename T, typename Prim, typename I, typename Query>
 [[gnu::always_inline]] inline bool visit_leaf(prepared_ray<T>& ray, bvh<Prim> const& b, std::uint32_t first,
                                               std::uint32_t count, I& isect, Query& query) {
+    if constexpr (!acceleration_structure<Prim>)
+        if (!ray.has_shear) ray.prepare_shear();
     if constexpr (stores_triangle_blocks_v<Prim>) {
         int remaining = int(count);
         for (std::uint32_t k = first; remaining > 0; ++k, remaining -= triangle_block_width)
@@ -281,8 +285,6 @@ template <typename T, typename Prim, typename I, typename Query>
 [[gnu::always_inline]] inline bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
     using S = typename bvh<Prim>::value_type;
     if (b.wide_nodes.empty()) return false;
-    if constexpr (!acceleration_structure<Prim>)
-        if (!ray.has_shear) ray.prepare_shear();
     if constexpr (std::is_base_of_v<instance_path, Query>) ray.instances = &query;
     detail::node_tester<T, S, I> nodes(ray, isect);
     detail::traversal_stack<S> stack;
@@ -304,11 +306,11 @@ template <typename T, typename Prim, typename I, typename Query>
     }
 }
 
-// Traverses b with a plain ray (prepared here, once: the triangle shear only if b holds
-// primitives); ray.tmax is tightened as the query allows.
+// Traverses b with a plain ray (prepared here, once; the triangle shear waits for the first leaf);
+// ray.tmax is tightened as the query allows.
 template <typename T, typename Prim, typename I, typename Query>
 [[gnu::always_inline]] inline bool traverse(basic_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
-    prepared_ray<T> prepared(ray, !acceleration_structure<Prim>);
+    prepared_ray<T> prepared(ray, false);
     bool const stop = traverse(prepared, b, isect, query);
     ray.tmax = prepared.tmax;
     return stop;

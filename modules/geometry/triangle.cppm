@@ -119,8 +119,8 @@ watertight_shear<T> make_watertight_shear(vec3<T> const& dir) {
 // their `Ray`; since it derives from basic_ray, hooks read origin/direction/tmin/tmax as usual and
 // `intersect(ray, tri)` inside a hook picks up the cached shear. Results are bit-identical to a
 // plain basic_ray. The shear is computed only where primitives are tested (canopy.bvh prepares it
-// on entering a BVH of primitives, not for BVHs of instances or of BVHs): has_shear says whether
-// it is there. `instances` points to the traversal's instance path (see instance_ids).
+// when the ray reaches its first leaf of primitives, so never for misses or for BVHs of instances
+// or of BVHs): has_shear says whether it is there. `instances` points to the traversal's instance path (see instance_ids).
 template <typename T>
 struct prepared_ray : basic_ray<T> {
     prepared_ray() = default;
@@ -129,7 +129,9 @@ struct prepared_ray : basic_ray<T> {
         if (with_shear) prepare_shear();
     }
 
-    void prepare_shear() {
+    // Out of line: called once per ray from inside traversal loops, where inlining it would only
+    // add to their register pressure.
+    [[gnu::noinline]] void prepare_shear() {
         shear = make_watertight_shear(this->direction);
         permuted_origin = shear.permute(this->origin);
         has_shear = true;
