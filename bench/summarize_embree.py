@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+"""Summarises the output of canopy_bench_embree into the table of targets.
+
+    build/release/bench/canopy_bench_embree --rounds 5 --threads-list 1,2 > embree.md
+    bench/summarize_embree.py embree.md
+
+Prints, for every scene, the ratio Canopy / Embree of the medians at 1 and 2 threads of each
+figure that has a target (docs/performance.md), and whether the target is met.
+"""
+import re
+import sys
+
+# (figure as the benchmark names it, label, target, True when larger is better)
+TARGETS = [
+    ("primary closest (Mrays/s)", "closest hit, primary rays", 1.2, True),
+    ("random closest (Mrays/s)", "closest hit, random rays", 1.0, True),
+    ("shadow any (Mrays/s)", "any hit, shadow rays", 1.0, True),
+    ("primary closest + alpha (Mrays/s)", "alpha rule (filter), primary closest", 1.5, True),
+    ("shadow any + alpha (Mrays/s)", "alpha rule (filter), shadow any", 1.5, True),
+    ("primary closest + alpha (triangle hook) (Mrays/s)", "alpha rule (triangle hook), primary closest", None, True),
+    ("memory (bytes/triangle stored)", "memory per triangle", 1.0, False),
+    ("build (ms; ratio > 1: Canopy slower)", "build time", 1.0, False),
+]
+
+
+def parse(path):
+    """{scene: {(threads, figure): ratio of medians}}"""
+    scenes, scene = {}, None
+    for line in open(path, encoding="utf-8"):
+        heading = re.match(r"## (\S+)", line)
+        if heading:
+            scene = heading.group(1)
+            scenes[scene] = {}
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if scene is None or len(cells) < 5 or not cells[4].startswith("**"):
+            continue
+        scenes[scene][(cells[0], cells[1])] = float(cells[4].strip("*"))
+    return scenes
+
+
+def main():
+    if len(sys.argv) != 2:
+        sys.exit(__doc__)
+    scenes = parse(sys.argv[1])
+    names = list(scenes)
+    print("| target | goal | " + " | ".join(names) + " |")
+    print("|---|---|" + "---|" * len(names))
+    for figure, label, goal, larger in TARGETS:
+        cells = []
+        for name in names:
+            values = scenes[name]
+            if figure.startswith("memory"):
+                got = [values.get(("–", figure))]
+            else:
+                got = [values.get((t, figure)) for t in ("1", "2")]
+            got = [g for g in got if g is not None]
+            if not got:
+                cells.append("–")
+                continue
+            text = " / ".join(f"{g:.2f}" for g in got)
+            if goal is not None:
+                met = all((g >= goal) if larger else (g <= goal) for g in got)
+                text = text if met else f"**{text}**"
+            cells.append(text)
+        goal_text = "–" if goal is None else (f"≥ {goal}" if larger else f"≤ {goal}")
+        print(f"| {label} | {goal_text} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
