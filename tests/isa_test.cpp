@@ -2,13 +2,12 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
-#include <cstdio>
 #include <string>
 #include <string_view>
-#include <sys/wait.h>
 #include <vector>
 
 #include "../modules/isa/cpu_features.hpp"
+#include "test_support.hpp"
 
 import canopy.simd;
 
@@ -59,22 +58,9 @@ std::vector<std::pair<std::string_view, bool>> compiler_detected_features() {
           {"vpclmulqdq", __builtin_cpu_supports("vpclmulqdq")}};
 }
 
-struct run_result {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
 // Runs `command` through the shell with CANOPY_ASSUME_CPU_FEATURES set to `assumed`.
-run_result run_assuming(std::string const& assumed, std::string const& command) {
-  std::string const line = "CANOPY_ASSUME_CPU_FEATURES='" + assumed + "' " + command + " 2>&1";
-  run_result result;
-  FILE* pipe = ::popen(line.c_str(), "r");
-  REQUIRE(pipe != nullptr);
-  char buffer[4096];
-  while (std::size_t const n = std::fread(buffer, 1, sizeof buffer, pipe)) result.output.append(buffer, n);
-  int const status = ::pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return result;
+test_support::command_result run_assuming(std::string const& assumed, std::string const& command) {
+    return test_support::run_command("CANOPY_ASSUME_CPU_FEATURES='" + assumed + "' " + command);
 }
 
 std::string join(std::vector<std::string_view> const& names, std::string_view skip = {}) {
@@ -134,10 +120,10 @@ TEST_CASE("programs refuse to start on a CPU without their ISA, with a message n
   std::string const programs[] = {"'" CANOPY_CLI "' info --plugins", "'" CANOPY_SELF "' 'this CPU runs the build ISA: nothing is missing'"};
   for (std::string const& program : programs) {
     INFO(program);
-    run_result const full = run_assuming(join(build), program);
+    auto const full = run_assuming(join(build), program);
     CHECK(full.exit_code == 0);
     for (std::string_view feature : {build.front(), build.back()}) {
-      run_result const lacking = run_assuming(join(build, feature), program);
+      auto const lacking = run_assuming(join(build, feature), program);
       INFO(lacking.output);
       CHECK(lacking.exit_code == 1);
       CHECK(lacking.output.find("this CPU lacks " + std::string(feature) + ".") != std::string::npos);

@@ -1,14 +1,17 @@
-// Helpers shared by the test files that need no Canopy type: a temporary folder per test.
+// Helpers shared by the test files that need no Canopy type: a temporary folder per test, and
+// running a shell command.
 //
 // Self-contained (standard headers only): include it with the test file's standard headers,
 // before its `import` lines.
 #pragma once
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <sys/wait.h>
 #include <unistd.h>
 
 namespace test_support {
@@ -47,5 +50,23 @@ private:
         return count;
     }
 };
+
+// What a shell command did: its exit status (128 + the signal when a signal ended it; -1 when
+// it could not be started) and what it wrote to stdout and stderr.
+struct command_result {
+    int exit_code = -1;
+    std::string output;
+};
+
+inline command_result run_command(std::string const& command) {
+    command_result result;
+    FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
+    if (pipe == nullptr) return result;
+    char buffer[4096];
+    while (std::size_t const n = std::fread(buffer, 1, sizeof buffer, pipe)) result.output.append(buffer, n);
+    int const status = ::pclose(pipe);
+    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    return result;
+}
 
 } // namespace test_support

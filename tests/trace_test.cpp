@@ -39,24 +39,13 @@ using canopy::vec3;
 constexpr float inf = std::numeric_limits<float>::infinity();
 constexpr float nan = std::numeric_limits<float>::quiet_NaN();
 
-struct run_result {
-    int exit_code = -1;
-    std::string output; // stdout and stderr
-};
+using run_result = test_support::command_result;
 
 // Runs the canopy program with the given arguments (each single-quoted for the shell).
 run_result run_canopy(std::vector<std::string> const& args) {
     std::string command = "'" CANOPY_CLI "'";
     for (auto const& a : args) command += " '" + a + "'";
-    command += " 2>&1";
-    run_result result;
-    FILE* pipe = ::popen(command.c_str(), "r");
-    REQUIRE(pipe != nullptr);
-    char buffer[4096];
-    while (std::size_t const n = std::fread(buffer, 1, sizeof buffer, pipe)) result.output.append(buffer, n);
-    int const status = ::pclose(pipe);
-    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-    return result;
+    return test_support::run_command(command);
 }
 
 std::string read_bytes(fs::path const& file) {
