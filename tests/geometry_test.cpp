@@ -9,6 +9,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <vector>
@@ -704,4 +705,51 @@ TEST_CASE("primitive bounds hold the primitive") {
     auto const s = get_bounds(canopy::sphere{{1, 2, 3}, 0.5f});
     CHECK(s.min.x == 0.5f);
     CHECK(s.max.z == 3.5f);
+}
+
+TEST_CASE("a block of triangles gives, lane by lane, the one-triangle watertight result bit for bit") {
+    random_source rng(21);
+    for (int i = 0; i < 2000; ++i) {
+        // A block with a random number of used lanes, some triangles degenerate (a repeated
+        // vertex, or three collinear vertices), some sharing vertices with the previous one.
+        int const used = rng.integer(1, canopy::triangle_block_width);
+        std::vector<triangle> tris;
+        for (int lane = 0; lane < used; ++lane) {
+            triangle t = random_triangle(rng, 5.0f, 2.0f);
+            if (lane > 0 && rng.integer(0, 3) == 0) t.v0 = tris.back().v1, t.v1 = tris.back().v0;
+            if (rng.integer(0, 9) == 0) t.v2 = t.v0;
+            if (rng.integer(0, 9) == 0) t.v2 = t.v0 + (t.v1 - t.v0) * 2.0f;
+            t.prim_id = std::uint32_t(10 * i + lane);
+            t.geom_id = std::uint32_t(lane);
+            tris.push_back(t);
+        }
+        std::vector<canopy::triangle_block> blocks;
+        canopy::append_triangle_blocks(blocks, tris.begin(), tris.end());
+        REQUIRE(blocks.size() == 1);
+        auto const& block = blocks[0];
+        for (auto const& r : random_rays_for(rng, tris[std::size_t(rng.integer(0, used - 1))])) {
+            canopy::prepared_ray<float> const prepared(r);
+            auto const hits = canopy::intersect_block(prepared, block);
+            for (int lane = 0; lane < canopy::triangle_block_width; ++lane) {
+                INFO("case " << i << ", lane " << lane);
+                bool const lane_hit = (hits.mask >> lane) & 1u;
+                if (lane >= used) {
+                    CHECK_FALSE(lane_hit);
+                    continue;
+                }
+                // The block gives back the very triangle, and the same record.
+                triangle const back = block.triangle_at(lane);
+                CHECK(std::memcmp(&back, &tris[std::size_t(lane)], sizeof(triangle)) == 0);
+                auto const one = intersect(r, tris[std::size_t(lane)]);
+                REQUIRE(lane_hit == bool(one.hit));
+                if (!lane_hit) continue;
+                auto const hr = hits.record(block, lane);
+                CHECK(bits(hr.t) == bits(one.t));
+                CHECK(bits(hr.u) == bits(one.u));
+                CHECK(bits(hr.v) == bits(one.v));
+                CHECK(hr.prim_id == one.prim_id);
+                CHECK(hr.geom_id == one.geom_id);
+            }
+        }
+    }
 }
