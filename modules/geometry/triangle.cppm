@@ -209,10 +209,13 @@ template <typename T, typename S>
 }
 
 // Möller & Trumbore 1997, "Fast, Minimum Storage Ray/Triangle Intersection" (opt-in; not
-// watertight: rays through shared edges can miss both triangles).
+// watertight: rays through shared edges can miss both triangles). Out of line: its products and
+// sums are not written as explicit fma, so a build with -ffp-contract=fast (which overrides the
+// pragma above) could fuse them differently where it is inlined; one body gives the same result
+// to a BVH's leaves and to a loop over the triangles.
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
-basic_hit_record<T> intersect_moller_trumbore(basic_ray<T> const& ray, basic_triangle<S> const& tri) {
+[[gnu::noinline]] basic_hit_record<T> intersect_moller_trumbore(basic_ray<T> const& ray, basic_triangle<S> const& tri) {
     basic_hit_record<T> hr;
     vec3<T> const e1(tri.v1 - tri.v0);
     vec3<T> const e2(tri.v2 - tri.v0);
