@@ -37,6 +37,7 @@ export module canopy.scene:compile;
 import canopy.math;
 import canopy.bvh;
 import :error;
+import :limits;
 import :graph;
 import :registry;
 import :compiled;
@@ -47,6 +48,7 @@ struct compile_options {
     registry const* plugins = nullptr; // expands custom nodes (required when the scene has any)
     bvh_build_options bvh{};
     std::string name{};                // how errors name the scene (usually its file)
+    resource_limits limits = default_limits(); // placements after flattening, nesting depth
 };
 
 

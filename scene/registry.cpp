@@ -51,13 +51,6 @@ auto with_rollback(scene& s, F&& f) {
     }
 }
 
-void require_regular_file(std::filesystem::path const& file) {
-    std::error_code ec;
-    auto const st = std::filesystem::status(file, ec);
-    if (!std::filesystem::exists(st)) throw scene_error(file.string(), "", "file not found");
-    if (std::filesystem::is_directory(st)) throw scene_error(file.string(), "", "is a folder, not a file");
-}
-
 } // namespace
 
 std::string extension_of(std::filesystem::path const& file) { return lower(file.extension().string()); }
@@ -140,12 +133,14 @@ image_data registry::load_image(std::filesystem::path const& file) const {
     auto it = image_loaders_.find(ext);
     if (it == image_loaders_.end())
         throw scene_error(file.string(), "", "no image loader for extension '" + ext + "'");
-    require_regular_file(file);
+    require_regular_file(file, "texture");
     image_data img;
     try {
         img = it->second.function(file);
     } catch (scene_error const&) {
         throw;
+    } catch (std::bad_alloc const&) {
+        throw scene_error(file.string(), "", "out of memory while reading the image");
     } catch (std::exception const& e) {
         throw scene_error(file.string(), "", e.what());
     }

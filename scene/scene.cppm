@@ -5,10 +5,12 @@
 //   canopy::compiled_scene c = canopy::compile(s);    // :compile  BVHs and instances, skip rules
 //   c.closest_hit(ray, isect);                        // :compiled what queries and kernels trace
 //   triangulate_polygon(corners);                     // :polygon  loaders' faces of n > 3 corners
+//   default_limits().max_texels = 1 << 28;            // :limits   resource limits, checked file opening
 //
 // Built-in loaders and generators live in plugins/ (module canopy.plugins).
 export module canopy.scene;
 export import :error;
+export import :limits;
 export import :graph;
 export import :registry;
 export import :compiled;
