@@ -67,17 +67,17 @@ inline std::uint64_t require_regular_file(std::filesystem::path const& file, std
                                           std::string const& what = {}) {
     std::error_code ec;
     auto const st = std::filesystem::status(file, ec);
-    std::string const who = what.empty() ? std::string() : what + " ";
+    std::string const role = what.empty() ? std::string() : " (" + what + ")";
     if (st.type() == std::filesystem::file_type::not_found || st.type() == std::filesystem::file_type::none)
-        throw scene_error(file.string(), "", who + "file not found");
+        throw scene_error(file.string(), "", "file not found" + role);
     if (st.type() != std::filesystem::file_type::regular)
-        throw scene_error(file.string(), "", who + "is " + file_kind_name(st.type()) + ", not a regular file");
+        throw scene_error(file.string(), "", "is " + std::string(file_kind_name(st.type())) + ", not a regular file" + role);
     std::uint64_t const size = std::filesystem::file_size(file, ec);
-    if (ec) throw scene_error(file.string(), "", who + "cannot be read: " + ec.message());
+    if (ec) throw scene_error(file.string(), "", "cannot be read: " + ec.message() + role);
     if (size > max_bytes)
         throw scene_error(file.string(), "",
-                          who + "is " + std::to_string(size) + " bytes, over the limit of " + std::to_string(max_bytes) +
-                              " bytes per file (--max-file-bytes)");
+                          "is " + std::to_string(size) + " bytes, over the limit of " + std::to_string(max_bytes) +
+                              " bytes per file (--max-file-bytes)" + role);
     return size;
 }
 
