@@ -19,6 +19,11 @@
 //   into them (call_hooks_or_descend below is the one place that decides).
 // - With default_intersector, or with hooks that only forward, the calls inline to exactly the
 //   default tests: no cost.
+// - Hooks receive the ray as traversal prepared it. A box hook that forwards to
+//   intersect(ray, box, args...) with that ray keeps traversal's box test, widened for the
+//   watertight triangle test (canopy.geometry:box). One that declares its ray as a plain
+//   canopy::ray forwards to the exact-box test, which can cull a triangle that rounding in the
+//   triangle test would hit (rays grazing long thin triangles): declare the Ray as a template.
 // - A filter (beyond the paper): a member `filter(ray, hr)` returning bool (a mask for packets)
 //   is called for the candidates the library's own test found, with t in [tmin, current tmax],
 //   u, v, prim_id, geom_id and the instance path (inst_id, inner_inst_id) filled in; a candidate

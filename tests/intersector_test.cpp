@@ -206,7 +206,7 @@ TEST_CASE("bvh_costs counts equal those of an independently written overload set
     auto check_counts = [&](auto const& structure, char const* name) {
         unsigned boxes = 0, tris = 0;
         auto counting = overload_set{
-            [&](ray const& r, aabb const& box, vec3<float> const& inv_dir) {
+            [&](auto const& r, aabb const& box, vec3<float> const& inv_dir) {
                 ++boxes;
                 return canopy::intersect(r, box, inv_dir);
             },

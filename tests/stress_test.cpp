@@ -25,6 +25,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <numbers>
 #include <random>
 #include <set>
 #include <sstream>
@@ -314,6 +315,138 @@ TEST_CASE("rays from inside a closed icosphere never miss") {
     INFO(count << " rays from inside a " << sphere.size() << "-triangle icosphere");
     require_no_failures(closest_misses, "closest_hit misses");
     require_no_failures(any_misses, "any_hit misses");
+}
+
+// 1b -----------------------------------------------------------------------------------------------
+
+namespace {
+
+// A closed cylinder of `segments` side quads from p0 to p1 with a triangle fan on each end. Each
+// vertex is one expression of its (end, segment) indices, so neighbours share bit-identical corners.
+std::vector<triangle> closed_cylinder(dvec3 p0, dvec3 p1, double radius, int segments) {
+    dvec3 const axis = canopy::normalize(p1 - p0);
+    dvec3 const helper = std::abs(axis.x) < 0.9 ? dvec3{1, 0, 0} : dvec3{0, 1, 0};
+    dvec3 const u = canopy::normalize(canopy::cross(axis, helper)), w = canopy::cross(axis, u);
+    auto const corner = [&](int end, int segment) {
+        double const angle = 2.0 * std::numbers::pi * double(segment % segments) / double(segments);
+        return vec3<float>((end == 0 ? p0 : p1) + (u * std::cos(angle) + w * std::sin(angle)) * radius);
+    };
+    vec3<float> const c0(p0), c1(p1);
+    std::vector<triangle> out;
+    for (int i = 0; i < segments; ++i) {
+        out.push_back({corner(0, i), corner(0, i + 1), corner(1, i + 1)});
+        out.push_back({corner(0, i), corner(1, i + 1), corner(1, i)});
+        out.push_back({c0, corner(0, i + 1), corner(0, i)});
+        out.push_back({c1, corner(1, i), corner(1, i + 1)});
+    }
+    for (std::size_t i = 0; i < out.size(); ++i) out[i].prim_id = std::uint32_t(i);
+    return out;
+}
+
+// A closed bicone: 2 × segments slivers from an equator of `radius` around `centre` to the apices
+// centre ± half_length · axis.
+std::vector<triangle> closed_bicone(dvec3 centre, dvec3 axis, double half_length, double radius, int segments) {
+    axis = canopy::normalize(axis);
+    dvec3 const helper = std::abs(axis.x) < 0.9 ? dvec3{1, 0, 0} : dvec3{0, 1, 0};
+    dvec3 const u = canopy::normalize(canopy::cross(axis, helper)), w = canopy::cross(axis, u);
+    auto const equator = [&](int i) {
+        double const angle = 2.0 * std::numbers::pi * double(i % segments) / double(segments);
+        return vec3<float>(centre + (u * std::cos(angle) + w * std::sin(angle)) * radius);
+    };
+    vec3<float> const left(centre - axis * half_length), right(centre + axis * half_length);
+    std::vector<triangle> out;
+    for (int i = 0; i < segments; ++i) {
+        out.push_back({left, equator(i + 1), equator(i)});
+        out.push_back({right, equator(i), equator(i + 1)});
+    }
+    for (std::size_t i = 0; i < out.size(); ++i) out[i].prim_id = std::uint32_t(i);
+    return out;
+}
+
+} // namespace
+
+TEST_CASE("rays from inside a closed thin cylinder and a closed bicone of slivers never miss") {
+    random_source rng(151);
+    struct shape {
+        std::string name;
+        std::vector<triangle> tris;
+        std::function<vec3<float>()> inside; // a random point well inside
+        double size;                         // the largest extent
+    };
+    std::vector<shape> shapes;
+    // Radius 0.01, length 16, 256 segments: side triangles of aspect ≈ 6.5e4, along an axis, along
+    // a diagonal and along a random direction away from the origin.
+    for (int k = 0; k < 3; ++k) {
+        dvec3 const axis = k == 0 ? dvec3{1, 0, 0} : k == 1 ? canopy::normalize(dvec3{1, 1, 1}) : dvec3(rng.direction());
+        dvec3 const centre = k == 2 ? dvec3{3.25, -7.5, 12.0} : dvec3{0, 0, 0};
+        double const radius = 0.01, half = 8.0;
+        dvec3 const helper = std::abs(axis.x) < 0.9 ? dvec3{1, 0, 0} : dvec3{0, 1, 0};
+        dvec3 const u = canopy::normalize(canopy::cross(axis, helper)), w = canopy::cross(axis, u);
+        shapes.push_back({"thin cylinder " + std::to_string(k), closed_cylinder(centre - axis * half, centre + axis * half, radius, 256),
+                          [=, &rng] {
+                              double const a = rng.uniform_double(0, 2 * std::numbers::pi);
+                              double const r = 0.95 * radius * std::sqrt(rng.uniform_double(0, 1));
+                              double const along = rng.uniform_double(-0.99, 0.99) * half;
+                              return vec3<float>(centre + axis * along + (u * std::cos(a) + w * std::sin(a)) * r);
+                          },
+                          2 * half});
+    }
+    // 4,096 slivers meeting at two apices: half length 1, radius 0.05.
+    for (int k = 0; k < 2; ++k) {
+        dvec3 const axis = k == 0 ? dvec3{1, 0, 0} : dvec3(rng.direction());
+        dvec3 const centre = k == 0 ? dvec3{0, 1.5, 0} : dvec3{-2.5, 4.0, 1.25};
+        double const radius = 0.05, half = 1.0;
+        dvec3 const helper = std::abs(axis.x) < 0.9 ? dvec3{1, 0, 0} : dvec3{0, 1, 0};
+        dvec3 const u = canopy::normalize(canopy::cross(axis, helper)), w = canopy::cross(axis, u);
+        shapes.push_back({"bicone " + std::to_string(k), closed_bicone(centre, axis, half, radius, 2048), [=, &rng] {
+                              double const along = rng.uniform_double(-0.98, 0.98) * half;
+                              double const room = radius * (1.0 - std::abs(along) / half);
+                              double const a = rng.uniform_double(0, 2 * std::numbers::pi);
+                              double const r = 0.9 * room * std::sqrt(rng.uniform_double(0, 1));
+                              return vec3<float>(centre + axis * along + (u * std::cos(a) + w * std::sin(a)) * r);
+                          },
+                          2 * half});
+    }
+    int const count = sized(250'000, 2'000'000);
+    for (shape const& sh : shapes) {
+        INFO(sh.name << ", " << sh.tris.size() << " triangles, " << count << " rays from inside");
+        REQUIRE(features_of(sh.tris).open_edges == 0);
+        mesh_bvh const b = canopy::build_binned_sah(sh.tris);
+        failure_log closest_misses, any_misses, brute_misses;
+        auto const edges = features_of(sh.tris).edges;
+        for (int i = 0; i < count; ++i) {
+            // Half the rays in random directions, half aimed at a random edge, a little way along
+            // from the point of the edge closest to the origin: a ray grazing a long triangle
+            // whose far corners are far away is where the watertight test's rounding (relative
+            // to the corners' distance) outgrows the box test's (relative to the hit's distance).
+            vec3<float> const origin = sh.inside();
+            vec3<float> direction = rng.direction();
+            if (i % 2 == 1) {
+                auto const& e = edges[std::size_t(rng.uniform_double(0, 1) * double(edges.size())) % edges.size()];
+                dvec3 const e0(e[0]), e1(e[1]);
+                double const closest_f = canopy::dot(dvec3(origin) - e0, e1 - e0) / canopy::dot(e1 - e0, e1 - e0);
+                double const along = rng.uniform_double(0.003, 0.12); // grazing: along ≫ across
+                double const f = std::clamp(closest_f + (i % 4 == 1 ? along : -along), 0.0, 1.0);
+                // Off the edge by up to a few units of the test's rounding (2^-22 of the mesh's
+                // size): just outside the box of the triangle across the edge, where the box
+                // test's own slack (relative to the short distance) does not reach.
+                dvec3 const off = dvec3(rng.in_ball()) * (sh.size * 0x1p-22);
+                direction = vec3<float>(e0 + (e1 - e0) * f + off - dvec3(origin));
+            }
+            ray const r{origin, 0.0f, direction, inf};
+            bool const closest_hits = closest(r, b).hit, any_hits = canopy::any_hit(r, &b, &b + 1).hit;
+            if (closest_hits && any_hits) continue;
+            // Every ray from inside a closed mesh hits; brute force says whether the triangle
+            // test alone would have.
+            bool const brute = brute_force_closest(r, sh.tris).hit;
+            if (!brute) brute_misses.add(describe(r));
+            if (!closest_hits) closest_misses.add(describe(r) + (brute ? " (brute force hits)" : ""));
+            if (!any_hits) any_misses.add(describe(r));
+        }
+        require_no_failures(brute_misses, "the triangle test alone misses");
+        require_no_failures(closest_misses, "closest_hit misses");
+        require_no_failures(any_misses, "any_hit misses");
+    }
 }
 
 // 2 ------------------------------------------------------------------------------------------------

@@ -8,7 +8,10 @@
 // - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls), with
 //   the ray's constants computed once per BVH (wide_box_ray);
 // - otherwise (double rays, packets) → the library's box test, once per child box.
-// All three compute the same conservative test (canopy.geometry:box): same hits, same order.
+// All three compute the same conservative test (canopy.geometry:box): same hits, same order. The
+// box tests of a ray are widened for its watertight triangle tests once per BVH entered with a
+// new ray (prepared_ray::widen_box_tests_for): no triangle the watertight test would hit sits in
+// a box the traversal culls.
 // Every primitive goes through call_hooks_or_descend (canopy.intersector): nested BVHs and
 // instances receive the same intersector and query; the leaves of triangle BVHs are blocks of four
 // triangles. Stacked entries whose entry distance lies beyond the ray's current tmax are skipped
@@ -51,7 +54,8 @@ struct wide_box_ray {
     [[gnu::always_inline]] inline explicit wide_box_ray(prepared_ray<float> const& ray) {
         for (int a = 0; a < 3; ++a) {
             auto const k = std::size_t(a);
-            origin[k] = simd::float8(ray.origin[a]);
+            near_origin[k] = simd::float8(ray.near_origin[a]);
+            far_origin[k] = simd::float8(ray.far_origin[a]);
             inv_dir[k] = simd::float8(ray.inv_dir[a]);
             // -0 has no inverse of its own: 1/-0 = -inf counts as negative, as in canopy.geometry:box.
             bool const negative = ray.inv_dir[a] < 0.0f;
@@ -67,7 +71,7 @@ struct wide_box_ray {
         box_tmax8 = simd::float8(box_tmax);
     }
 
-    std::array<simd::float8, 3> origin, inv_dir;
+    std::array<simd::float8, 3> near_origin, far_origin, inv_dir; // see prepared_ray::widen_box_tests_for
     std::array<std::size_t, 3> near_row, far_row;
     simd::float8 tmin, box_tmax8;
     float box_tmax = 0.0f;
@@ -84,8 +88,9 @@ struct wide_box_ray {
     float8 tnear = ray.tmin;
     float8 tfar(std::numeric_limits<float>::infinity());
     for (std::size_t a = 0; a < 3; ++a) {
-        float8 const slab_near = (float8::load(node.planes[ray.near_row[a]].data()) - ray.origin[a]) * ray.inv_dir[a];
-        float8 const slab_far = (float8::load(node.planes[ray.far_row[a]].data()) - ray.origin[a]) * ray.inv_dir[a];
+        float8 const slab_near =
+            (float8::load(node.planes[ray.near_row[a]].data()) - ray.near_origin[a]) * ray.inv_dir[a];
+        float8 const slab_far = (float8::load(node.planes[ray.far_row[a]].data()) - ray.far_origin[a]) * ray.inv_dir[a];
         tnear = simd::max(slab_near, tnear);
         tfar = simd::min(slab_far, tfar);
     }
@@ -311,6 +316,7 @@ template <typename T, typename Prim, typename I, typename Query>
 template <typename T, typename Prim, typename I, typename Query>
 [[gnu::always_inline]] inline bool traverse(basic_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
     prepared_ray<T> prepared(ray, false);
+    prepared.widen_box_tests_for(b.bounds());
     bool const stop = traverse(prepared, b, isect, query);
     ray.tmax = prepared.tmax;
     return stop;

@@ -27,6 +27,7 @@ module;
 #include <utility>
 export module canopy.geometry:triangle;
 import canopy.math;
+import :box;
 import :hit_record;
 
 export namespace canopy {
@@ -125,8 +126,18 @@ template <typename T>
 struct prepared_ray : basic_ray<T> {
     prepared_ray() = default;
     explicit prepared_ray(basic_ray<T> const& r, bool with_shear = true)
-        : basic_ray<T>(r), inv_dir(simd::rcp(r.direction.x), simd::rcp(r.direction.y), simd::rcp(r.direction.z)) {
+        : basic_ray<T>(r), inv_dir(simd::rcp(r.direction.x), simd::rcp(r.direction.y), simd::rcp(r.direction.z)),
+          near_origin(r.origin), far_origin(r.origin) {
         if (with_shear) prepare_shear();
+    }
+
+    // Makes the ray's box tests conservative with respect to its watertight triangle tests for
+    // primitives inside `bounds` (canopy.geometry:box, box_margin_origins). Traversal calls it
+    // once per BVH entered with a new ray, with the BVH's bounds (which hold every nested BVH
+    // traversed with the same ray).
+    template <typename S>
+    void widen_box_tests_for(basic_aabb<S> const& bounds) {
+        box_margin_origins(static_cast<basic_ray<T> const&>(*this), inv_dir, bounds, near_origin, far_origin);
     }
 
     // Out of line: called once per ray from inside traversal loops, where inlining it would only
@@ -139,6 +150,7 @@ struct prepared_ray : basic_ray<T> {
 
     watertight_shear<T> shear;
     vec3<T> inv_dir;
+    vec3<T> near_origin, far_origin; // where box tests measure near and far planes from
     vec3<T> permuted_origin;
     bool has_shear = false;
     instance_path const* instances = nullptr;
@@ -159,6 +171,14 @@ std::span<std::uint32_t const> instance_ids(Ray const& ray) {
             return std::span<std::uint32_t const>(ray.instances->ids.data(), std::size_t(ray.instances->depth));
     }
     return {};
+}
+
+// The box test of traversal: as the plain one, from the ray's widened origins.
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+[[gnu::always_inline]] inline box_hit<T> intersect(prepared_ray<T> const& ray, basic_aabb<S> const& box,
+                                                   vec3<T> const& inv_dir) {
+    return intersect_slabs(ray, box, inv_dir, ray.near_origin, ray.far_origin);
 }
 
 // Woop et al.'s test for a ray whose shear is already known.
