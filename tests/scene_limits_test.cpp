@@ -19,6 +19,7 @@
 
 import canopy.scene;
 import canopy.plugins.json;
+import canopy.plugins.gltf;
 
 #include "scene_support.hpp"
 
@@ -236,6 +237,32 @@ TEST_CASE("limits: a JSON chain of 20000 prototypes is refused at the default de
     REQUIRE(c.top_meshes.size() == 1);
     CHECK(c.top_meshes[0].transform.translation.x == 0.5f * float(n - 1));
     CHECK(c.top_meshes[0].id == 5);
+}
+
+TEST_CASE("limits: a glTF node hierarchy 20000 deep is refused at the default depth naming the node") {
+    constexpr int n = 20000;
+    std::string text = R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [)";
+    for (int k = 0; k < n; ++k)
+        text += std::string(k ? "," : "") + R"({"translation": [0.5, 0, 0], )" +
+                (k + 1 < n ? R"("children": [)" + std::to_string(k + 1) + "]}" : std::string(R"("mesh": 0})"));
+    text += R"(], "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "buffers": [{"byteLength": 36, "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}]})";
+    test_support::temp_folder folder("scene_limits_test");
+    auto const file = folder.write("deep.gltf", text);
+    canopy::registry r;
+    canopy::register_gltf_plugin(r);
+    canopy::scene s;
+    r.load(s, file, s.root());
+    // root → group 'deep.gltf' (1) → nodes[0] (2) → …: nodes[4095] is 4097 deep, the mesh n + 2.
+    std::string const message = message_of([&] { canopy::compile(s, {.name = file.string()}); });
+    CHECK(message == file.string() +
+                         ": transform 'nodes[4095]': 20002 levels of nesting (children and instances) exceed the limit of 4096 "
+                         "(--max-depth)");
+    auto const c = canopy::compile(s, with_depth(file.string(), 20002));
+    REQUIRE(c.top_meshes.size() == 1);
+    CHECK(c.top_meshes[0].transform.translation.x == 0.5f * float(n));
 }
 
 // ---- placements: counted before they are made -------------------------------------------------
