@@ -318,6 +318,30 @@ TEST_CASE("limits: the placements of the whole scene are limited, groups and dir
           "grid.json: 3 meshes, instances, cameras and lights at the top level exceed the limit of 2 (--max-placements)");
 }
 
+TEST_CASE("limits: children shared by several parents are counted per path, not walked per path") {
+    // 70 levels, each group holding the next level twice: 2^70 paths to the bottom.
+    auto const diamond = [](bool with_mesh) {
+        canopy::scene s;
+        node_id below = s.add_group(no_node, "bottom");
+        if (with_mesh) s.add_mesh_node(below, s.add_mesh(square("square")), "tile");
+        for (int level = 0; level < 70; ++level) {
+            node_id const g = s.add_group(no_node, "level " + std::to_string(level));
+            s.attach(g, below);
+            s.attach(g, below);
+            below = g;
+        }
+        s.attach(s.root(), below);
+        return s;
+    };
+    auto const full = diamond(true);
+    CHECK(message_of([&] { canopy::compile(full, {.name = "dag"}); }) ==
+          "dag: at least 18446744073709551615 meshes, instances, cameras and lights at the top level exceed the limit of "
+          "16777216 (--max-placements)");
+    auto const empty = diamond(false);
+    CHECK(message_of([&] { canopy::compile(empty, {.name = "dag"}); }) ==
+          "dag: the scene has nothing to trace (no mesh with triangles is placed in it)");
+}
+
 // ---- large groups: one pass -------------------------------------------------------------------
 
 TEST_CASE("limits: one small mesh placed 10^6 times through instance nodes in one group") {
