@@ -21,15 +21,39 @@
 //   - custom nodes are expanded by the plugins that registered their types.
 // Placements keep the order of the graph (depth first, children in order), so the inst_id of a
 // hit is the index of its placement in that order; placement::id keeps the instance node's own id.
-// Errors (scene_error): instance cycles (the message lists the nodes on the cycle), custom nodes
-// of an unregistered type, and a scene with nothing to trace.
+//
+// Hostile graphs. Nothing here recurses: every walk keeps its own stack, so a chain of 10^5
+// nodes or instances costs memory in proportion, not stack frames. The work is linear in the
+// graph plus the placements made (a node with 10^6 children, or 10^6 instances of one prototype,
+// is one pass; chains of single-child nodes are composed once and reused). Before anything is
+// allocated, counts are taken with saturating arithmetic and checked against
+// compile_options::limits (resource_limits):
+//   - depth: a node more than max_depth child or instance links below the root is refused, naming
+//     that node (--max-depth);
+//   - placements: the placements of each group after flattening, and of the whole scene, over
+//     max_placements are refused, naming the group's node (--max-placements); so are more than
+//     max_placements meshes, instances, cameras and lights at the top level (children shared by
+//     several parents are counted once per path).
+// Running out of memory all the same is reported as a scene_error naming the scene.
+//
+// Errors (scene_error, naming the file — the node's source, else compile_options::name — and the
+// node): instance cycles (the message lists the nodes on the cycle), custom nodes of an
+// unregistered type, children or targets that do not exist, the limits above, a transform or
+// instance node whose transform is not finite or cannot be inverted in float, a placement whose
+// composed transform (in double, then rounded) is not finite, cannot be inverted in float or puts
+// the mesh's bounds outside float range, a camera or light placed where it is not finite, and a
+// scene with nothing to trace.
 module;
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
+#include <limits>
 #include <map>
+#include <new>
 #include <optional>
 #include <set>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -72,6 +96,29 @@ affine_transform<float> narrow(xf64 const& a) {
             vec3<float>(a.translation)};
 }
 
+template <typename T> bool finite(vec3<T> v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+bool finite(xf64 const& a) {
+    return finite(a.linear.col0) && finite(a.linear.col1) && finite(a.linear.col2) && finite(a.translation);
+}
+
+// A double value that stays finite once rounded to float.
+bool finite_in_float(vec3<double> v) { return finite(vec3<float>(v)); }
+
+std::uint64_t saturating_add(std::uint64_t a, std::uint64_t b) {
+    return a > std::numeric_limits<std::uint64_t>::max() - b ? std::numeric_limits<std::uint64_t>::max() : a + b;
+}
+
+// check_limit, for counts taken with saturating_add: one that saturated says so.
+void check_count(std::string const& file, std::string const& where, std::uint64_t count, std::uint64_t limit,
+                 char const* what, char const* option) {
+    if (count == std::numeric_limits<std::uint64_t>::max() && count > limit)
+        throw scene_error(file, where,
+                          "at least " + std::to_string(count) + " " + what + " exceed the limit of " + std::to_string(limit) +
+                              " (" + option + ")");
+    check_limit(file, where, count, limit, what, option);
+}
+
 // A transform on the way down: `identity` is exact (no product was ever taken).
 struct frame {
     xf64 xf = xf64::identity();
@@ -90,12 +137,25 @@ struct frame {
     affine_transform<float> rounded() const { return identity ? affine_transform<float>::identity() : narrow(xf); }
 };
 
-// A placement found by the walk: a mesh (target = no_node) or an instanced subtree.
-struct item {
-    std::uint32_t mesh;
-    node_id target;
-    frame where;
-    std::uint32_t id; // the user id of the instance node that placed it, or invalid_id
+// Bounds in double (empty: lo > hi).
+struct box64 {
+    vec3<double> lo{std::numeric_limits<double>::infinity()};
+    vec3<double> hi{-std::numeric_limits<double>::infinity()};
+
+    void add(vec3<double> p) {
+        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+    bool empty() const { return lo.x > hi.x; }
+    // The box of the eight corners mapped by xf.
+    box64 mapped(xf64 const& xf) const {
+        box64 out;
+        if (empty()) return out;
+        for (int k = 0; k < 8; ++k)
+            out.add(xf.transform_point(vec3<double>((k & 1) ? hi.x : lo.x, (k & 2) ? hi.y : lo.y, (k & 4) ? hi.z : lo.z)));
+        return out;
+    }
+    bool finite_in_float() const { return empty() || (canopy::finite_in_float(lo) && canopy::finite_in_float(hi)); }
 };
 
 std::string node_label(scene const& s, node_id n) {
@@ -103,98 +163,134 @@ std::string node_label(scene const& s, node_id n) {
     return std::string(to_string(nd.kind)) + (nd.name.empty() ? " #" + std::to_string(n) : " '" + nd.name + "'");
 }
 
+// Whether a node's children are walked (the other kinds are leaves, or an instance's one link).
+bool has_children(node const& nd) {
+    return nd.kind == node_kind::group || nd.kind == node_kind::transform || nd.kind == node_kind::custom;
+}
+
+inline constexpr std::uint32_t no_slot = ~std::uint32_t(0);
+
 class compiler {
 public:
-    compiler(scene const& s, compile_options const& o) : s_(s), o_(o) {}
+    compiler(scene const& s, compile_options const& o) : s_(s), o_(o), nodes_(s.nodes()) {}
 
     compiled_scene run() {
         auto const start = std::chrono::steady_clock::now();
-        stats_.nodes = s_.nodes().size();
+        stats_.nodes = nodes_.size();
         stats_.meshes_in_scene = s_.meshes().size();
-        check_cycles();
+        order_nodes();
+        check_depth();
+        scan();
+        top_.build(*this, false);
+        full_.build(*this, true);
+        for (node_id n : reachable_)
+            if (nodes_[n].kind == node_kind::instance && full_.count[nodes_[n].target] == 0) ++stats_.subtrees_empty;
 
-        std::vector<item> found;
-        walk(s_.root(), frame{}, found, true);
-
-        // Resolve instanced subtrees: one mesh → placed directly; several → a group.
+        // The top level, in graph order: meshes reached through children alone, and instances —
+        // of one mesh: placed directly; of several: a group (made below, once per subtree).
+        check_count(o_.name, "", top_.count[s_.root()], o_.limits.max_placements,
+                    "meshes, instances, cameras and lights at the top level", "--max-placements");
         struct group_item {
             std::uint32_t group;
             frame where;
             std::uint32_t id;
+            node_id node;
         };
         std::vector<group_item> groups_placed;
-        std::vector<item> meshes; // in the order of the graph
-        for (auto const& st : found) {
-            if (st.target == no_node) {
-                meshes.push_back(st);
-                continue;
+        std::vector<placement> loose; // placement::index is the scene's mesh until renumbered
+        expand(top_, s_.root(), frame{}, [&](node_id leaf, frame const& where, std::uint32_t, bool) {
+            node const& nd = nodes_[leaf];
+            switch (nd.kind) {
+            case node_kind::mesh: loose.push_back(make_placement(leaf, where, invalid_id, no_node, nullptr)); break;
+            case node_kind::instance: {
+                if (full_.count[nd.target] == 0) break;
+                frame const at = compose(where, nd.transform, leaf);
+                if (full_.count[nd.target] == 1) {
+                    expand(full_, nd.target, at, [&](node_id mesh, frame const& placed, std::uint32_t, bool) {
+                        loose.push_back(make_placement(mesh, placed, nd.instance_id, leaf, nullptr));
+                    });
+                    ++direct_single_mesh_;
+                } else {
+                    groups_placed.push_back({group_of(nd.target), at, nd.instance_id, leaf});
+                }
+                break;
             }
-            prototype const& p = prototype_of(st.target);
-            if (p.meshes.empty()) {
-                ++stats_.subtrees_empty;
-                continue;
+            case node_kind::camera: place_camera(leaf, where); break;
+            case node_kind::light: place_light(leaf, where); break;
+            default: break;
             }
-            if (p.meshes.size() == 1) {
-                meshes.push_back({p.meshes[0].mesh, no_node, st.where.then(p.meshes[0].where), st.id});
-                ++direct_single_mesh_;
-                continue;
-            }
-            groups_placed.push_back({group_of(st.target), st.where, st.id});
+        });
+
+        // Every group's placements after flattening, then the scene's, before any is made.
+        std::uint64_t placements = loose.size();
+        for (node_id t : group_targets_) {
+            check_count(file_of(t), node_label(s_, t), full_.count[t], o_.limits.max_placements,
+                        "placements after flattening", "--max-placements");
+            placements = saturating_add(placements, full_.count[t]);
+        }
+        check_count(o_.name, "", placements, o_.limits.max_placements, "placements after flattening", "--max-placements");
+        for (node_id t : group_targets_) {
+            prototype g{nodes_[t].name.empty() ? node_label(s_, t) : nodes_[t].name, t, {}, {}};
+            g.placements.reserve(std::size_t(full_.count[t]));
+            expand(full_, t, frame{}, [&](node_id mesh, frame const& where, std::uint32_t id, bool nested) {
+                g.placements.push_back(make_placement(mesh, where, id, no_node, &g));
+                if (nested) ++stats_.flattened_placements;
+            });
+            group_protos_.push_back(std::move(g));
         }
 
-        if (meshes.empty() && groups_placed.empty())
+        if (loose.empty() && groups_placed.empty())
             throw scene_error(o_.name, "", "the scene has nothing to trace (no mesh with triangles is placed in it)");
 
-        compiled_scene c;
-        // Meshes: only those placed, in order of first use.
-        for (auto const& m : meshes) compiled_mesh_of(m.mesh);
-        for (auto const& g : group_protos_)
-            for (auto const& m : g.meshes) compiled_mesh_of(m.mesh);
+        // Meshes: only those placed, numbered in order of first use.
+        for (auto& p : loose) p.index = compiled_mesh_of(p.index);
+        for (auto& g : group_protos_)
+            for (auto& p : g.placements) p.index = compiled_mesh_of(p.index);
 
         // Levels and placements.
+        compiled_scene c;
         if (groups_placed.empty()) {
-            if (meshes.size() == 1 && meshes[0].where.identity) {
+            if (loose.size() == 1 && loose[0].transform.is_identity()) {
                 c.levels = 0;
-                compiled_mesh_of(meshes[0].mesh);
-                stats_.placements = stats_.identity_placements = 1;
                 decide("one mesh with an identity transform: traced directly, no top-level BVH (levels 0)");
             } else {
                 c.levels = 1;
-                for (auto const& m : meshes) add_placement(c.top_meshes, m);
+                c.top_meshes = std::move(loose);
                 decide("top-level BVH over " + std::to_string(c.top_meshes.size()) + " mesh placements (levels 1)");
             }
-        } else if (groups_placed.size() == 1 && meshes.empty() && groups_placed[0].where.identity) {
+        } else if (groups_placed.size() == 1 && loose.empty() && groups_placed[0].where.identity) {
             c.levels = 1;
-            for (auto const& m : group_protos_[groups_placed[0].group].meshes)
-                add_placement(c.top_meshes, m);
-            group_protos_.clear();
+            c.top_meshes = std::move(group_protos_[groups_placed[0].group].placements);
             decide("one untransformed subtree: its placements form the top level (levels 1)");
         } else {
             c.levels = 2;
-            for (auto const& g : group_protos_) {
+            for (auto& g : group_protos_) {
                 compiled_group cg;
                 cg.name = g.name;
-                for (auto const& m : g.meshes) add_placement(cg.placements, m);
+                cg.placements = std::move(g.placements);
                 c.groups.push_back(std::move(cg));
             }
-            for (auto const& [g, where, id] : groups_placed) {
+            for (auto const& [g, where, id, node] : groups_placed) {
+                check_group_instance(node, where, group_protos_[g].bounds);
                 c.top_groups.push_back({g, where.rounded(), id});
                 ++stats_.group_instances;
             }
-            if (!meshes.empty()) {
+            if (!loose.empty()) {
                 // Meshes placed outside any multi-mesh subtree share one extra group, placed
                 // with the identity (the traversal reuses the ray: no transform is applied).
-                compiled_group loose;
-                loose.name = "(meshes outside instanced subtrees)";
-                for (auto const& m : meshes) add_placement(loose.placements, m);
+                compiled_group extra;
+                extra.name = "(meshes outside instanced subtrees)";
+                std::size_t const count = loose.size();
+                extra.placements = std::move(loose);
                 c.top_groups.push_back({std::uint32_t(c.groups.size()), affine_transform<float>::identity(), invalid_id});
-                c.groups.push_back(std::move(loose));
-                decide(std::to_string(meshes.size()) +
+                c.groups.push_back(std::move(extra));
+                decide(std::to_string(count) +
                        " mesh placements outside instanced subtrees: one extra group, placed with the identity");
             }
             decide("top-level BVH over " + std::to_string(c.top_groups.size()) + " instances of " +
                    std::to_string(c.groups.size()) + " groups (levels 2)");
         }
+        group_protos_ = {};
         stats_.groups = c.groups.size();
         stats_.levels = c.levels;
         if (direct_single_mesh_ > 0)
@@ -216,8 +312,10 @@ public:
         }
         stats_.materials = s_.materials().size();
         std::vector<bool> material_used(c.materials.size(), false);
-        c.meshes.resize(mesh_map_.size());
-        for (auto const& [source, index] : mesh_map_) {
+        c.meshes.resize(meshes_built_);
+        for (std::uint32_t source = 0; source < compiled_index_.size(); ++source) {
+            std::uint32_t const index = compiled_index_[source];
+            if (index == no_slot) continue;
             mesh_data const& md = s_.meshes()[source];
             compiled_mesh& cm = c.meshes[index];
             cm.name = md.name;
@@ -233,15 +331,19 @@ public:
             stats_.triangles_stored += md.triangles.size();
         }
         stats_.meshes_built = c.meshes.size();
-        // Triangles in the world: every placement at every level.
+        // Triangles in the world: every placement at every level (a group's sum taken once).
         auto const triangles_of = [&](std::vector<placement> const& ps) {
-            std::size_t n = 0;
-            for (auto const& p : ps) n += c.meshes[p.index].triangles.size();
+            std::uint64_t n = 0;
+            for (auto const& p : ps) n = saturating_add(n, c.meshes[p.index].triangles.size());
             return n;
         };
-        if (c.levels == 0) stats_.triangles_placed = c.meshes[0].triangles.size();
-        if (c.levels == 1) stats_.triangles_placed = triangles_of(c.top_meshes);
-        for (auto const& g : c.top_groups) stats_.triangles_placed += triangles_of(c.groups[g.index].placements);
+        std::uint64_t placed = 0;
+        if (c.levels == 0) placed = c.meshes[0].triangles.size();
+        if (c.levels == 1) placed = triangles_of(c.top_meshes);
+        std::vector<std::uint64_t> group_triangles;
+        for (auto const& g : c.groups) group_triangles.push_back(triangles_of(g.placements));
+        for (auto const& g : c.top_groups) placed = saturating_add(placed, group_triangles[g.index]);
+        stats_.triangles_placed = std::size_t(std::min<std::uint64_t>(placed, std::numeric_limits<std::size_t>::max()));
         stats_.meshes_unreferenced = s_.meshes().size() - c.meshes.size() - empty_meshes_.size();
         stats_.meshes_empty = empty_meshes_.size();
         for (std::size_t i = 1; i < c.materials.size(); ++i) {
@@ -290,168 +392,395 @@ public:
     }
 
 private:
+    // A subtree placed as a group: its placements in its own frame, deeper nesting flattened.
     struct prototype {
         std::string name;
-        std::vector<item> meshes; // in the subtree's frame, deeper nesting flattened
-        bool done = false;
+        node_id node;
+        std::vector<placement> placements;
+        box64 bounds; // of the placed meshes, in the subtree's frame
     };
+
+    // From a node down the only way on to the first leaf or fork (a node with several ways on):
+    // the transforms on the way composed, and the id of the outermost instance of a single mesh.
+    struct jump {
+        node_id end;
+        frame where;
+        std::uint32_t id = invalid_id;
+        bool nested = false; // passes through an instance of a multi-mesh subtree
+    };
+
+    // The graph as one kind of walk sees it. full: through children and instance targets down to
+    // meshes with triangles (what a group holds once flattened). top: through children alone;
+    // meshes, instances, cameras and lights are its leaves. Per node: how many leaves lie below
+    // (paths counted, saturating), the links that lead to any (in order), and jumps, made lazily.
+    struct reach {
+        std::vector<std::uint64_t> count;
+        std::vector<std::size_t> first;  // into ways
+        std::vector<std::uint32_t> ways_of;
+        std::vector<node_id> ways;
+        std::vector<std::uint32_t> jump_slot;
+        std::vector<jump> jumps;
+
+        void build(compiler const& c, bool full) {
+            std::size_t const n = c.nodes_.size();
+            count.assign(n, 0);
+            first.assign(n, 0);
+            ways_of.assign(n, 0);
+            jump_slot.assign(n, no_slot);
+            ways.clear();
+            jumps.clear();
+            for (node_id v : c.order_) {
+                node const& nd = c.nodes_[v];
+                if (c.is_leaf(nd, full)) {
+                    count[v] = 1;
+                    continue;
+                }
+                first[v] = ways.size();
+                auto const link = [&](node_id w) {
+                    if (count[w] == 0) return;
+                    ways.push_back(w);
+                    count[v] = saturating_add(count[v], count[w]);
+                };
+                if (has_children(nd))
+                    for (node_id w : nd.children) link(w);
+                else if (nd.kind == node_kind::instance && full)
+                    link(nd.target);
+                ways_of[v] = std::uint32_t(ways.size() - first[v]);
+            }
+        }
+    };
+
+    bool is_leaf(node const& nd, bool full) const {
+        switch (nd.kind) {
+        case node_kind::mesh: return nd.mesh < s_.meshes().size() && !s_.meshes()[nd.mesh].triangles.empty();
+        case node_kind::instance:
+        case node_kind::camera:
+        case node_kind::light: return !full;
+        default: return false;
+        }
+    }
+
+    std::string const& file_of(node_id n) const { return nodes_[n].source.empty() ? o_.name : nodes_[n].source; }
+
+    [[noreturn]] void fail(node_id n, std::string const& problem) const {
+        throw scene_error(file_of(n), node_label(s_, n), problem);
+    }
+
+    // outer ∘ inner, refused (naming `at`) when a value leaves double range.
+    frame compose(frame const& outer, frame const& inner, node_id at) const {
+        frame const f = outer.then(inner);
+        if (!f.identity && !finite(f.xf)) fail(at, "the transforms composed through it leave double range (a value is not finite)");
+        return f;
+    }
+    frame compose(frame const& outer, affine_transform<float> const& local, node_id at) const {
+        frame const f = outer.then(local);
+        if (!f.identity && !finite(f.xf)) fail(at, "the transforms composed through it leave double range (a value is not finite)");
+        return f;
+    }
+
+    // The transform a fork applies to all its children.
+    frame below(node_id fork, frame const& where) const {
+        node const& nd = nodes_[fork];
+        return nd.kind == node_kind::transform ? compose(where, nd.transform, fork) : where;
+    }
+
+    jump jump_of(reach& r, node_id v) {
+        if (r.ways_of[v] != 1) return {v, frame{}, invalid_id, false};
+        if (r.jump_slot[v] != no_slot) return r.jumps[r.jump_slot[v]];
+        // Down the chain to a node that is not a link of one, or one already known; then back up.
+        std::vector<node_id> chain;
+        node_id u = v;
+        while (r.ways_of[u] == 1 && r.jump_slot[u] == no_slot) {
+            chain.push_back(u);
+            u = r.ways[r.first[u]];
+        }
+        jump inner = r.ways_of[u] == 1 ? r.jumps[r.jump_slot[u]] : jump{u, frame{}, invalid_id, false};
+        for (auto it = chain.rbegin(); it != chain.rend(); ++it) {
+            node const& nd = nodes_[*it];
+            jump j = inner;
+            if (nd.kind == node_kind::transform || nd.kind == node_kind::instance)
+                j.where = compose(frame{}.then(nd.transform), inner.where, *it);
+            if (nd.kind == node_kind::instance) {
+                if (r.count[*it] == 1) j.id = nd.instance_id;
+                else j.nested = true;
+            }
+            r.jump_slot[*it] = std::uint32_t(r.jumps.size());
+            r.jumps.push_back(j);
+            inner = j;
+        }
+        return inner;
+    }
+
+    // Calls leaf(node, frame, id, nested) for every leaf of `r` below `start`, depth first,
+    // children in order; `base` places start. Each call costs O(1) amortised: chains of single
+    // links are crossed by their jumps, links without leaves are not kept.
+    template <typename Leaf>
+    void expand(reach& r, node_id start, frame const& base, Leaf&& leaf) {
+        if (r.count[start] == 0) return;
+        jump const j = jump_of(r, start);
+        frame const at = compose(base, j.where, start);
+        if (r.count[start] == 1) {
+            leaf(j.end, at, j.id, j.nested);
+            return;
+        }
+        struct entry {
+            node_id fork;
+            frame where; // of the fork's children
+            std::uint32_t next;
+            bool nested;
+        };
+        std::vector<entry> stack;
+        stack.push_back({j.end, below(j.end, at), 0, j.nested});
+        while (!stack.empty()) {
+            entry& e = stack.back();
+            if (e.next == r.ways_of[e.fork]) {
+                stack.pop_back();
+                continue;
+            }
+            node_id const c = r.ways[r.first[e.fork] + e.next++];
+            jump const jc = jump_of(r, c);
+            frame const where = compose(e.where, jc.where, c);
+            bool const nested = e.nested || jc.nested;
+            if (r.count[c] == 1) leaf(jc.end, where, jc.id, nested);
+            else stack.push_back({jc.end, below(jc.end, where), 0, nested});
+        }
+    }
 
     void decide(std::string line) { stats_.decisions.push_back(std::move(line)); }
 
     std::uint32_t compiled_mesh_of(std::uint32_t source) {
-        return mesh_map_.try_emplace(source, std::uint32_t(mesh_map_.size())).first->second;
-    }
-
-    // Places scene mesh `source` (its compiled index is assigned on first use).
-    void add_placement(std::vector<placement>& out, item const& m) {
-        out.push_back({compiled_mesh_of(m.mesh), m.where.rounded(), m.id});
-        ++stats_.placements;
-        if (out.back().transform.is_identity()) ++stats_.identity_placements;
-    }
-
-    // Depth-first walk from `n`; top = whether cameras and lights here belong to the scene.
-    void walk(node_id n, frame const& where, std::vector<item>& found, bool top) {
-        node const& nd = s_.at(n);
-        switch (nd.kind) {
-        case node_kind::group:
-        case node_kind::custom:
-            if (nd.kind == node_kind::custom && nd.children.empty())
-                throw scene_error(nd.source.empty() ? o_.name : nd.source, node_label(s_, n),
-                                  "custom node of type '" + nd.custom_type + "' was not expanded (no plugin registry given)");
-            for (node_id c : nd.children) walk(c, where, found, top);
-            break;
-        case node_kind::transform:
-            if (nd.transform.is_identity()) ++stats_.identity_transform_nodes;
-            for (node_id c : nd.children) walk(c, where.then(nd.transform), found, top);
-            break;
-        case node_kind::mesh:
-            if (s_.meshes()[nd.mesh].triangles.empty()) {
-                empty_meshes_.insert(nd.mesh);
-                break;
-            }
-            found.push_back({nd.mesh, no_node, where, invalid_id});
-            break;
-        case node_kind::instance:
-            found.push_back({0, nd.target, where.then(nd.transform), nd.instance_id});
-            break;
-        case node_kind::camera:
-            ++stats_.cameras;
-            if (top && !camera_) {
-                camera_data c = nd.camera;
-                if (!where.identity) {
-                    auto const xf = where.xf;
-                    c.eye = vec3<float>(xf.transform_point(vec3<double>(c.eye)));
-                    c.target = vec3<float>(xf.transform_point(vec3<double>(c.target)));
-                    c.up = vec3<float>(xf.transform_vector(vec3<double>(c.up)));
-                }
-                camera_ = c;
-            }
-            break;
-        case node_kind::light:
-            ++stats_.lights;
-            if (top) {
-                light_data l = nd.light;
-                if (!where.identity) {
-                    l.position = vec3<float>(where.xf.transform_point(vec3<double>(l.position)));
-                    l.direction = vec3<float>(normalize(where.xf.transform_vector(vec3<double>(l.direction))));
-                }
-                lights_.push_back(l);
-            }
-            break;
-        }
-    }
-
-    prototype const& prototype_of(node_id target) {
-        auto& p = protos_[target];
-        if (p.done) return p;
-        p.name = s_.at(target).name;
-        std::vector<item> found;
-        walk(target, frame{}, found, false);
-        std::vector<item> meshes;
-        for (auto const& st : found) {
-            if (st.target == no_node) {
-                meshes.push_back(st);
-                continue;
-            }
-            prototype const& inner = prototype_of(st.target);
-            if (inner.meshes.empty()) ++stats_.subtrees_empty;
-            for (auto const& m : inner.meshes) {
-                meshes.push_back({m.mesh, no_node, st.where.then(m.where), inner.meshes.size() == 1 ? st.id : m.id});
-                if (inner.meshes.size() > 1) ++stats_.flattened_placements;
-            }
-        }
-        auto& q = protos_[target]; // (re-fetch: the map may not move, but keep it obvious)
-        q.meshes = std::move(meshes);
-        q.done = true;
-        return q;
+        if (compiled_index_.empty()) compiled_index_.assign(s_.meshes().size(), no_slot);
+        if (compiled_index_[source] == no_slot) compiled_index_[source] = meshes_built_++;
+        return compiled_index_[source];
     }
 
     std::uint32_t group_of(node_id target) {
-        auto [it, fresh] = group_index_.try_emplace(target, std::uint32_t(group_protos_.size()));
-        if (fresh) {
-            prototype const& p = prototype_of(target);
-            group_protos_.push_back({p.name.empty() ? node_label(s_, target) : p.name, p.meshes, true});
-        }
+        auto [it, fresh] = group_index_.try_emplace(target, std::uint32_t(group_targets_.size()));
+        if (fresh) group_targets_.push_back(target);
         return it->second;
     }
 
-    // Children and instance targets must form no cycle: colour-marking depth-first search.
-    void check_cycles() const {
-        std::vector<std::uint8_t> colour(s_.nodes().size(), 0); // 0 new, 1 on the path, 2 done
-        std::vector<node_id> path;
-        std::vector<std::pair<node_id, std::size_t>> stack;     // (node, next edge)
-        auto const edges = [&](node_id n) {
-            std::vector<node_id> e = s_.at(n).children;
-            if (s_.at(n).kind == node_kind::instance) e.push_back(s_.at(n).target);
-            return e;
+    box64 const& mesh_bounds(std::uint32_t mesh) {
+        if (mesh_bounds_.empty()) mesh_bounds_.resize(s_.meshes().size());
+        auto& b = mesh_bounds_[mesh];
+        if (!b) {
+            b.emplace();
+            mesh_data const& md = s_.meshes()[mesh];
+            for (auto const& t : md.triangles)
+                for (std::uint32_t v : t) b->add(vec3<double>(md.positions[v]));
+        }
+        return *b;
+    }
+
+    // Where a placement is named: its mesh node, the group it is in, the instance that placed it.
+    std::string placement_label(node_id mesh, node_id placed_by, prototype const* in) const {
+        std::string where = node_label(s_, mesh);
+        if (in != nullptr) where += " in " + node_label(s_, in->node);
+        if (placed_by != no_node) where += " placed by " + node_label(s_, placed_by);
+        return where;
+    }
+
+    // The placement of mesh node `mesh` (placement::index: the scene's mesh), counted; in a group,
+    // its bounds are added to the group's. A placement that does not survive rounding to float is
+    // refused by name.
+    placement make_placement(node_id mesh, frame const& where, std::uint32_t id, node_id placed_by, prototype* in) {
+        std::uint32_t const source = nodes_[mesh].mesh;
+        placement const p{source, where.rounded(), id};
+        ++stats_.placements;
+        box64 bounds;
+        if (p.transform.is_identity()) {
+            ++stats_.identity_placements;
+            bounds = mesh_bounds(source);
+        } else {
+            if (char const* problem = transform_problem(p.transform))
+                throw scene_error(file_of(mesh), placement_label(mesh, placed_by, in),
+                                  std::string("the transforms above it, composed and rounded to float: ") + problem);
+            bounds = mesh_bounds(source).mapped(widen(p.transform));
+            if (!bounds.finite_in_float())
+                throw scene_error(file_of(mesh), placement_label(mesh, placed_by, in),
+                                  "placed by the transforms above it, its bounds are not finite in float");
+        }
+        if (in != nullptr && !bounds.empty()) {
+            in->bounds.add(bounds.lo);
+            in->bounds.add(bounds.hi);
+        }
+        return p;
+    }
+
+    void check_group_instance(node_id instance, frame const& where, box64 const& bounds) const {
+        if (where.identity) return;
+        affine_transform<float> const xf = where.rounded();
+        if (char const* problem = transform_problem(xf))
+            fail(instance, std::string("the transforms above it, composed and rounded to float: ") + problem);
+        if (!bounds.mapped(widen(xf)).finite_in_float())
+            fail(instance, "placed by the transforms above it, the bounds of its subtree are not finite in float");
+    }
+
+    void place_camera(node_id n, frame const& where) {
+        if (camera_) return;
+        camera_data c = nodes_[n].camera;
+        if (!where.identity) {
+            vec3<double> const eye = where.xf.transform_point(vec3<double>(c.eye));
+            vec3<double> const target = where.xf.transform_point(vec3<double>(c.target));
+            vec3<double> const up = where.xf.transform_vector(vec3<double>(c.up));
+            if (!finite_in_float(eye) || !finite_in_float(target) || !finite_in_float(up))
+                fail(n, "placed by the transforms above it, the camera's eye, target or up is not finite in float");
+            c.eye = vec3<float>(eye);
+            c.target = vec3<float>(target);
+            c.up = vec3<float>(up);
+        }
+        if (!finite(c.eye) || !finite(c.target) || !finite(c.up)) fail(n, "the camera's eye, target or up is not finite");
+        if (c.eye.x == c.target.x && c.eye.y == c.target.y && c.eye.z == c.target.z)
+            fail(n, "placed by the transforms above it, the camera's eye and target coincide in float");
+        camera_ = c;
+    }
+
+    void place_light(node_id n, frame const& where) {
+        light_data l = nodes_[n].light;
+        if (!where.identity) {
+            vec3<double> const position = where.xf.transform_point(vec3<double>(l.position));
+            vec3<double> const direction = where.xf.transform_vector(vec3<double>(l.direction));
+            double const length = std::sqrt(dot(direction, direction));
+            if (!finite_in_float(position) || !(length > 0.0) || !std::isfinite(length))
+                fail(n, "placed by the transforms above it, the light's position or direction is not finite in float");
+            l.position = vec3<float>(position);
+            l.direction = vec3<float>(direction / length);
+        }
+        if (!finite(l.position) || !finite(l.direction) || !finite(l.colour)) fail(n, "the light has a value that is not finite");
+        lights_.push_back(l);
+    }
+
+    // Children and instance targets must exist and form no cycle: colour-marking depth-first
+    // search over every node, with its own stack. Leaves order_ children before parents.
+    void order_nodes() {
+        std::size_t const n = nodes_.size();
+        std::vector<std::uint8_t> colour(n, 0); // 0 new, 1 on the path, 2 done
+        order_.reserve(n);
+        auto const degree = [&](node_id v) {
+            return nodes_[v].children.size() + (nodes_[v].kind == node_kind::instance ? 1 : 0);
         };
-        for (node_id start = 0; start < s_.nodes().size(); ++start) {
+        auto const link = [&](node_id v, std::size_t k) {
+            node const& nd = nodes_[v];
+            node_id const w = k < nd.children.size() ? nd.children[k] : nd.target;
+            if (w >= n)
+                fail(v, (k < nd.children.size() ? "child " : "instance target ") + std::to_string(w) + " does not exist");
+            return w;
+        };
+        std::vector<std::pair<node_id, std::size_t>> stack; // (node, next link); also the path
+        for (node_id start = 0; start < n; ++start) {
             if (colour[start] != 0) continue;
             stack.push_back({start, 0});
             colour[start] = 1;
-            path.push_back(start);
             while (!stack.empty()) {
-                auto& [n, next] = stack.back();
-                auto const e = edges(n);
-                if (next == e.size()) {
-                    colour[n] = 2;
-                    path.pop_back();
+                auto& [v, next] = stack.back();
+                if (next == degree(v)) {
+                    colour[v] = 2;
+                    order_.push_back(v);
                     stack.pop_back();
                     continue;
                 }
-                node_id const m = e[next++];
-                if (colour[m] == 1) {
+                node_id const w = link(v, next++);
+                if (colour[w] == 1) {
                     std::string cycle;
-                    auto const from = std::find(path.begin(), path.end(), m);
-                    for (auto it = from; it != path.end(); ++it) cycle += node_label(s_, *it) + " → ";
-                    cycle += node_label(s_, m);
+                    auto const from = std::find_if(stack.begin(), stack.end(), [&](auto const& e) { return e.first == w; });
+                    for (auto it = from; it != stack.end(); ++it) cycle += node_label(s_, it->first) + " → ";
+                    cycle += node_label(s_, w);
                     throw scene_error(o_.name, "", "instance cycle: " + cycle);
                 }
-                if (colour[m] == 0) {
-                    colour[m] = 1;
-                    path.push_back(m);
-                    stack.push_back({m, 0});
+                if (colour[w] == 0) {
+                    colour[w] = 1;
+                    stack.push_back({w, 0});
                 }
             }
+        }
+    }
+
+    // The links walks follow: a group's, transform's or custom node's children, an instance's target.
+    template <typename F>
+    void for_each_link(node const& nd, F&& f) const {
+        if (has_children(nd))
+            for (node_id w : nd.children) f(w);
+        else if (nd.kind == node_kind::instance)
+            f(nd.target);
+    }
+
+    // No node more than max_depth links below the root: heights (children before parents), then
+    // down the deepest path to name the first node past the limit.
+    void check_depth() const {
+        std::vector<std::uint32_t> height(nodes_.size(), 0);
+        for (node_id v : order_)
+            for_each_link(nodes_[v], [&](node_id w) { height[v] = std::max(height[v], height[w] + 1); });
+        std::uint64_t const depth = height[s_.root()];
+        if (depth <= o_.limits.max_depth) return;
+        node_id v = s_.root();
+        for (std::uint64_t d = 0; d <= o_.limits.max_depth; ++d) {
+            node_id next = v;
+            for_each_link(nodes_[v], [&](node_id w) {
+                if (next == v && height[w] + 1 == height[v]) next = w;
+            });
+            v = next;
+        }
+        check_limit(file_of(v), node_label(s_, v), depth, o_.limits.max_depth, "levels of nesting (children and instances)",
+                    "--max-depth");
+    }
+
+    // Every node the root reaches, once: the checks on single nodes, and what is counted per node.
+    void scan() {
+        std::vector<bool> seen(nodes_.size(), false);
+        std::vector<node_id> stack{s_.root()};
+        seen[s_.root()] = true;
+        while (!stack.empty()) {
+            node_id const v = stack.back();
+            stack.pop_back();
+            reachable_.push_back(v);
+            node const& nd = nodes_[v];
+            switch (nd.kind) {
+            case node_kind::custom:
+                if (nd.children.empty())
+                    fail(v, "custom node of type '" + nd.custom_type + "' was not expanded (no plugin registry given)");
+                break;
+            case node_kind::transform:
+            case node_kind::instance:
+                if (char const* problem = transform_problem(nd.transform)) fail(v, problem);
+                if (nd.kind == node_kind::transform && nd.transform.is_identity()) ++stats_.identity_transform_nodes;
+                break;
+            case node_kind::mesh:
+                if (nd.mesh >= s_.meshes().size()) fail(v, "mesh index " + std::to_string(nd.mesh) + " does not exist");
+                if (s_.meshes()[nd.mesh].triangles.empty()) empty_meshes_.insert(nd.mesh);
+                break;
+            case node_kind::camera: ++stats_.cameras; break;
+            case node_kind::light: ++stats_.lights; break;
+            case node_kind::group: break;
+            }
+            for_each_link(nd, [&](node_id w) {
+                if (!seen[w]) {
+                    seen[w] = true;
+                    stack.push_back(w);
+                }
+            });
         }
     }
 
     scene const& s_;
     compile_options const& o_;
+    std::vector<node> const& nodes_;
     compile_statistics stats_;
-    std::map<node_id, prototype> protos_;
+    std::vector<node_id> order_;     // every node, children and targets before their parents
+    std::vector<node_id> reachable_; // the nodes the root reaches
+    reach top_, full_;
     std::map<node_id, std::uint32_t> group_index_;
+    std::vector<node_id> group_targets_;
     std::vector<prototype> group_protos_;
-    std::map<std::uint32_t, std::uint32_t> mesh_map_; // scene mesh → compiled mesh
+    std::vector<std::optional<box64>> mesh_bounds_;
+    std::vector<std::uint32_t> compiled_index_; // scene mesh → compiled mesh, or no_slot
+    std::uint32_t meshes_built_ = 0;
     std::set<std::uint32_t> empty_meshes_;
     std::size_t direct_single_mesh_ = 0;
     std::optional<camera_data> camera_;
     std::vector<light_data> lights_;
 };
 
-} // namespace
-
-compiled_scene compile(scene const& s, compile_options const& options) {
+compiled_scene compile_checked(scene const& s, compile_options const& options) {
     bool has_custom = false;
     for (auto const& n : s.nodes()) has_custom |= n.kind == node_kind::custom;
     if (has_custom && options.plugins != nullptr) {
@@ -467,6 +796,19 @@ compiled_scene compile(scene const& s, compile_options const& options) {
         return c;
     }
     return compiler(s, options).run();
+}
+
+} // namespace
+
+compiled_scene compile(scene const& s, compile_options const& options) {
+    try {
+        return compile_checked(s, options);
+    } catch (std::bad_alloc const&) {
+        throw scene_error(options.name, "", "out of memory while compiling the scene (lower --max-placements or "
+                                            "--max-triangles to be refused before allocating)");
+    } catch (std::length_error const&) {
+        throw scene_error(options.name, "", "out of memory while compiling the scene (a list grew past its maximum size)");
+    }
 }
 
 } // namespace canopy

@@ -20,6 +20,7 @@ module;
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <initializer_list>
 #include <map>
 #include <optional>
 #include <string>
@@ -28,6 +29,27 @@ module;
 export module canopy.scene:graph;
 import canopy.math;
 import :error;
+
+namespace canopy {
+
+// What is wrong with a float transform, or nullptr: a value that is not finite, or a linear part
+// that cannot be inverted in float (zero determinant, or an inverse — computed in double, rounded
+// to float once as the traversal does — that is not finite). Rays through such a transform would
+// miss silently. Shared by the graph's checks and compile()'s checks of composed placements.
+char const* transform_problem(affine_transform<float> const& xf) {
+    auto const finite = [](affine_transform<float> const& a) {
+        for (vec3<float> const v : {a.linear.col0, a.linear.col1, a.linear.col2, a.translation})
+            if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) return false;
+        return true;
+    };
+    if (!finite(xf)) return "transform has a value that is not finite";
+    double const det = determinant(mat3<double>{vec3<double>(xf.linear.col0), vec3<double>(xf.linear.col1),
+                                                vec3<double>(xf.linear.col2)});
+    if (!(std::abs(det) > 0.0) || !finite(inverse(xf))) return "transform is singular (it cannot be inverted)";
+    return nullptr;
+}
+
+} // namespace canopy
 
 export namespace canopy {
 
@@ -253,26 +275,28 @@ public:
     void attach(node_id parent, node_id child) {
         check_parent(parent);
         nodes_.at(child);
-        nodes_[parent].children.push_back(child);
+        append_child(parent, child);
     }
 
-    // Rolls the scene back to a mark: loaders that fail leave nothing behind.
+    // Rolls the scene back to a mark: loaders that fail leave nothing behind. Both take constant
+    // time (a mark is five sizes; rolling back undoes only what was added since), so that nested
+    // loads and custom-node expansions stay linear in the size of the scene.
     struct mark {
         std::size_t nodes, meshes, materials, images;
-        std::vector<std::size_t> children_of_old; // size of each old node's child list
+        std::size_t appended; // entries of the child log (see append_child)
     };
-    mark make_mark() const {
-        mark m{nodes_.size(), meshes_.size(), materials_.size(), images_.size(), {}};
-        m.children_of_old.reserve(nodes_.size());
-        for (auto const& n : nodes_) m.children_of_old.push_back(n.children.size());
-        return m;
-    }
+    mark make_mark() const { return {nodes_.size(), meshes_.size(), materials_.size(), images_.size(), appended_to_.size()}; }
     void roll_back(mark const& m) {
         nodes_.resize(m.nodes);
         meshes_.resize(m.meshes);
         materials_.resize(m.materials);
         images_.resize(m.images);
-        for (std::size_t i = 0; i < nodes_.size(); ++i) nodes_[i].children.resize(m.children_of_old[i]);
+        // Children appended since the mark come off their parents' lists, newest first.
+        while (appended_to_.size() > m.appended) {
+            node_id const parent = appended_to_.back();
+            appended_to_.pop_back();
+            if (parent < nodes_.size()) nodes_[parent].children.pop_back();
+        }
     }
 
 private:
@@ -286,13 +310,7 @@ private:
     static bool all_finite(vec3<float> v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
     static void check_transform(affine_transform<float> const& xf, std::string const& name) {
-        if (!all_finite(xf.linear.col0) || !all_finite(xf.linear.col1) || !all_finite(xf.linear.col2) ||
-            !all_finite(xf.translation))
-            throw scene_error("", "node '" + name + "'", "transform has a value that is not finite");
-        double const det = determinant(mat3<double>{vec3<double>(xf.linear.col0), vec3<double>(xf.linear.col1),
-                                                    vec3<double>(xf.linear.col2)});
-        if (!(std::abs(det) > 0.0) || !std::isfinite(1.0 / det))
-            throw scene_error("", "node '" + name + "'", "transform is singular (it cannot be inverted)");
+        if (char const* problem = transform_problem(xf)) throw scene_error("", "node '" + name + "'", problem);
     }
 
     void check_parent(node_id parent) const {
@@ -307,8 +325,14 @@ private:
         if (parent != no_node) check_parent(parent);
         nodes_.push_back(std::move(n));
         node_id const id = node_id(nodes_.size() - 1);
-        if (parent != no_node) nodes_[parent].children.push_back(id);
+        if (parent != no_node) append_child(parent, id);
         return id;
+    }
+
+    // Every child list grows only here, and the log of parents lets roll_back undo it.
+    void append_child(node_id parent, node_id child) {
+        nodes_[parent].children.push_back(child);
+        appended_to_.push_back(parent);
     }
 
     void validate(mesh_data const& m) const {
@@ -340,6 +364,7 @@ private:
     std::vector<mesh_data> meshes_;
     std::vector<material_data> materials_;
     std::vector<image_data> images_;
+    std::vector<node_id> appended_to_; // the parent of every child appended, in order
 };
 
 } // namespace canopy

@@ -295,6 +295,7 @@ private:
             require_object(e, path);
             std::string name = name_of(e, path, prototypes_, "prototype");
             node_id const root = s_.add_group(no_node, name);
+            s_.at(root).source = file_;
             prototypes_.emplace(std::move(name), root);
         });
         for_each(list, "prototypes", [&](json const& e, std::string const& path) {
