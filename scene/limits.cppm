@@ -6,7 +6,7 @@
 // checked against a limit, and a claim over it is refused with a scene_error naming the file, the
 // element and the limit, e.g.
 //   "forest.json: node 'trees': 10000000 placements after flattening exceed the limit of
-//    16777216 (--max-placements)"
+//    4194304 (--max-placements)"
 // The defaults let every real scene through on a machine with a few GiB and keep a hostile file
 // from taking the machine down; a user with bigger data raises them (resource_limits fields, or
 // the CLI options named in each field's comment).
@@ -32,8 +32,9 @@ struct resource_limits {
     // Triangles held by the scene's meshes together (each mesh counted once, however often it is
     // placed), and vertices likewise. --max-triangles
     std::uint64_t max_triangles = std::uint64_t(1) << 28;
-    // Placements of meshes after instances are flattened (compile()'s placements). --max-placements
-    std::uint64_t max_placements = std::uint64_t(1) << 24;
+    // Placements of meshes after instances are flattened (compile()'s placements); a placement
+    // costs about 400 bytes once compiled, so the default is about 1.7 GB. --max-placements
+    std::uint64_t max_placements = std::uint64_t(1) << 22;
     // Nesting depth of the graph: children below children and instances of instances, and the
     // nesting of a scene file's own structures (JSON arrays, glTF node hierarchies).
     // Nothing recurses in proportion to it, but deeper input is refused. --max-depth

@@ -273,10 +273,12 @@ TEST_CASE("limits: instances nested 10 per level are counted before flattening a
     CHECK(eight.size() < 8000);
     canopy::parse_json_scene(eight, "forest.json", nullptr, s, s.root());
     CHECK(message_of([&] { canopy::compile(s, {.name = "forest.json"}); }) ==
-          "forest.json: group 'trees': 100000000 placements after flattening exceed the limit of 16777216 (--max-placements)");
+          "forest.json: group 'trees': 100000000 placements after flattening exceed the limit of 4194304 (--max-placements)");
 
     canopy::scene seven;
     canopy::parse_json_scene(json_nest(7), "forest.json", nullptr, seven, seven.root());
+    CHECK(message_of([&] { canopy::compile(seven, {.name = "forest.json"}); }) ==
+          "forest.json: group 'trees': 10000000 placements after flattening exceed the limit of 4194304 (--max-placements)");
     CHECK(message_of([&] { canopy::compile(seven, with_placements("forest.json", 1000000)); }) ==
           "forest.json: group 'trees': 10000000 placements after flattening exceed the limit of 1000000 (--max-placements)");
 
@@ -285,7 +287,7 @@ TEST_CASE("limits: instances nested 10 per level are counted before flattening a
     canopy::parse_json_scene(json_nest(30), "forest.json", nullptr, thirty, thirty.root());
     CHECK(message_of([&] { canopy::compile(thirty, {.name = "forest.json"}); }) ==
           "forest.json: group 'trees': at least 18446744073709551615 placements after flattening exceed the limit of "
-          "16777216 (--max-placements)");
+          "4194304 (--max-placements)");
 
     // Under the limit, the same nest compiles: 10^3 placements, in graph order (the one
     // untransformed subtree is the top level).
@@ -336,7 +338,7 @@ TEST_CASE("limits: children shared by several parents are counted per path, not 
     auto const full = diamond(true);
     CHECK(message_of([&] { canopy::compile(full, {.name = "dag"}); }) ==
           "dag: at least 18446744073709551615 meshes, instances, cameras and lights at the top level exceed the limit of "
-          "16777216 (--max-placements)");
+          "4194304 (--max-placements)");
     auto const empty = diamond(false);
     CHECK(message_of([&] { canopy::compile(empty, {.name = "dag"}); }) ==
           "dag: the scene has nothing to trace (no mesh with triangles is placed in it)");
