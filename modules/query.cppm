@@ -20,6 +20,7 @@ module;
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 #include <utility>
 export module canopy.query;
 export import canopy.bvh;
@@ -131,12 +132,69 @@ auto active_lanes(Ray const& ray) {
                simd::isfinite(d.x) & simd::isfinite(d.y) & simd::isfinite(d.z);
 }
 
+// The intersector's mistakes (canopy.intersector, intersector_mistake) as compile errors, here at
+// the query: one message, naming what to write, and no errors from deeper inside the library.
+template <intersector_mistake M>
+constexpr bool report_intersector_mistake() {
+    using enum intersector_mistake;
+    static_assert(M != const_hooks_not_const,
+                  "canopy: this intersector is passed as const, but its hooks (operator() or filter) are not const "
+                  "member functions, so they would never be called. Pass the intersector non-const, or declare the "
+                  "hooks const: `auto operator()(Ray const& ray, Prim const& prim) const`.");
+    static_assert(M != primitive_result,
+                  "canopy: a ray/primitive hook must return canopy::basic_hit_record<T> (T: the ray's value type), "
+                  "e.g. `auto hr = intersect(ray, prim); hr.hit &= keep; return hr;`. To accept or reject candidates "
+                  "with a bool, write a filter instead: "
+                  "`template <typename Ray> bool filter(Ray const& ray, canopy::basic_hit_record<float> const& hr)`.");
+    static_assert(M != box_result,
+                  "canopy: a ray/box hook must return what the library's box test returns: "
+                  "`return intersect(ray, box, std::forward<Args>(args)...);` (canopy::box_hit<T>).");
+    static_assert(M != filter_result,
+                  "canopy: filter(ray, hr) must return bool (for packet rays: the mask of the ray's value type), "
+                  "true to keep the candidate.");
+    static_assert(M != swapped_parameters,
+                  "canopy: this intersector's hook takes its parameters in the order (primitive, ray): the ray comes "
+                  "first. Expected: `template <typename Ray> auto operator()(Ray const& ray, Prim const& prim)` and, "
+                  "for boxes, `template <typename Ray, typename... Args> auto operator()(Ray const& ray, "
+                  "canopy::aabb const& box, Args&&... args)`.");
+    static_assert(M != non_const_parameters,
+                  "canopy: this intersector's hook takes its primitive, box or ray by non-const reference, so it can "
+                  "never be called: the library passes them const. Expected: "
+                  "`template <typename Ray> auto operator()(Ray const& ray, Prim const& prim)`.");
+    static_assert(M != box_hook_without_args,
+                  "canopy: this intersector's box hook takes (ray, box) only: box tests also pass the inverse "
+                  "direction. Expected: `template <typename Ray, typename... Args> auto operator()(Ray const& ray, "
+                  "canopy::aabb const& box, Args&&... args)`, returning `intersect(ray, box, "
+                  "std::forward<Args>(args)...)`.");
+    static_assert(M != other_precision,
+                  "canopy: this intersector's hooks are for the other precision (e.g. basic_triangle<double> or "
+                  "basic_aabb<double> in a query of float rays over float triangles, or float hooks in a double "
+                  "query), so they would never be called. Declare them for the query's types, or generically: "
+                  "`template <typename Ray, typename S> auto operator()(Ray const& ray, "
+                  "canopy::basic_triangle<S> const& tri)`.");
+    static_assert(M != scalar_hooks_for_packets,
+                  "canopy: this intersector's hooks take scalar rays (canopy::ray), but this query traces packets "
+                  "(basic_ray<simd::float8>, ...), so they would never be called. Take the ray as a template "
+                  "parameter: `template <typename Ray> auto operator()(Ray const& ray, Prim const& prim)`.");
+    static_assert(M != no_usable_hook,
+                  "canopy: this intersector declares operator(), but none of its overloads can serve as a hook for "
+                  "this query's ray and primitive types, so it would never be called. Expected (Prim: the primitive "
+                  "type at the bottom of the query, e.g. canopy::triangle): "
+                  "`template <typename Ray> auto operator()(Ray const& ray, Prim const& prim)` returning "
+                  "canopy::basic_hit_record<T>, and/or `template <typename Ray, typename... Args> auto "
+                  "operator()(Ray const& ray, canopy::aabb const& box, Args&&... args)`.");
+    return M == none;
+}
+
 template <typename Ray, typename It, typename I, typename Query>
 void run_query(Ray& ray, It first, It last, I& isect, Query& query) {
-    static_assert(instance_nesting_v<std::remove_cvref_t<decltype(*first)>> <= max_instance_depth,
+    using Elem = std::remove_cvref_t<decltype(*first)>;
+    static_assert(instance_nesting_v<Elem> <= max_instance_depth,
                   "instances nest deeper than hit records can report (max_instance_depth)");
-    for (; first != last; ++first)
-        if (call_hooks_or_descend(ray, *first, isect, query)) return;
+    if constexpr (report_intersector_mistake<intersector_mistake_v<I, Ray, Elem>>()) {
+        for (; first != last; ++first)
+            if (call_hooks_or_descend(ray, *first, isect, query)) return;
+    }
 }
 
 } // namespace detail

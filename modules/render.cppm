@@ -198,9 +198,11 @@ vec4<float> path_kernel(Scene const& scene, ray r, I isect, pixel_random& rng, i
     return vec4<float>(radiance, 1.0f);
 }
 
-// The paper's cost counter: ray/box and ray/triangle tests, at every level of the scene.
-struct bvh_costs : basic_intersector<bvh_costs> {
-    using basic_intersector<bvh_costs>::operator();
+// The paper's cost counter (its bvh_costs, §4): ray/box and ray/triangle tests, at every level of
+// the scene. Named differently so that the paper's own code, which defines bvh_costs, compiles
+// under `using namespace canopy;`.
+struct cost_counter : basic_intersector<cost_counter> {
+    using basic_intersector<cost_counter>::operator();
 
     template <typename Ray, typename... Args>
     auto operator()(Ray const& ray, aabb const& box, Args&&... args) {

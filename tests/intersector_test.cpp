@@ -8,6 +8,8 @@
 #include <cstdint>
 #include <limits>
 #include <random>
+#include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -440,4 +442,218 @@ TEST_CASE("hooks and filters see the instance path they run in, at every level")
     CHECK(plain.calls == int(rays.size() * soup.size()));
     CHECK(plain.empty_paths == plain.calls);
     CHECK(check.empty_paths == 0);
+}
+
+// ---- mistakes are loud (SPEC §3.9); tests/compile_fail/ shows the queries refuse them ----------
+
+namespace {
+
+using canopy::intersector_mistake;
+using packet_ray = canopy::basic_ray<canopy::simd::float8>;
+
+// The alpha mask with const hooks and a const filter: a const intersector that works.
+struct const_alpha_mask : canopy::basic_intersector<const_alpha_mask> {
+    using canopy::basic_intersector<const_alpha_mask>::operator();
+    template <typename Ray>
+    auto operator()(Ray const& r, triangle const& tri) const {
+        ++*hook_calls;
+        auto hr = intersect(r, tri);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
+        return hr;
+    }
+    template <typename Ray, typename... Args>
+    auto operator()(Ray const& r, aabb const& box, Args&&... args) const {
+        ++*box_calls;
+        return intersect(r, box, std::forward<Args>(args)...);
+    }
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) const {
+        ++*filter_calls;
+        return hr.prim_id % 3 != 0;
+    }
+    unsigned* hook_calls;
+    unsigned* box_calls;
+    unsigned* filter_calls;
+};
+
+// The same, non-const: the reference for the const one.
+struct alpha_mask_filtered : alpha_mask {
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) {
+        return hr.prim_id % 3 != 0;
+    }
+};
+
+struct filter_only : canopy::basic_intersector<filter_only> {
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) {
+        return hr.prim_id % 2 == 0;
+    }
+};
+
+struct non_const_filter : canopy::basic_intersector<non_const_filter> {
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const&) {
+        return true;
+    }
+};
+
+struct filter_returning_a_record : canopy::basic_intersector<filter_returning_a_record> {
+    template <typename Ray>
+    canopy::basic_hit_record<float> filter(Ray const&, canopy::basic_hit_record<float> const& hr) {
+        return hr;
+    }
+};
+
+struct box_hook_returning_bool : canopy::basic_intersector<box_hook_returning_bool> {
+    using canopy::basic_intersector<box_hook_returning_bool>::operator();
+    template <typename Ray, typename... Args>
+    bool operator()(Ray const& r, aabb const& box, Args&&... args) {
+        return intersect(r, box, std::forward<Args>(args)...).hit;
+    }
+};
+
+struct scalar_ray_hook : canopy::basic_intersector<scalar_ray_hook> {
+    using canopy::basic_intersector<scalar_ray_hook>::operator();
+    auto operator()(ray const& r, triangle const& tri) { return intersect(r, tri); }
+};
+
+struct float_box_hook_only : canopy::basic_intersector<float_box_hook_only> {
+    using canopy::basic_intersector<float_box_hook_only>::operator();
+    template <typename Ray, typename... Args>
+    auto operator()(Ray const& r, aabb const& box, Args&&... args) {
+        return intersect(r, box, std::forward<Args>(args)...);
+    }
+};
+
+template <typename I, typename Elem, typename Ray = ray>
+constexpr intersector_mistake mistake = canopy::intersector_mistake_v<I, Ray, Elem>;
+
+} // namespace
+
+TEST_CASE("intersectors whose hooks would be ignored are told apart from those that are fine") {
+    using dtriangle = basic_triangle<double>;
+    using dray = canopy::basic_ray<double>;
+    // Fine: hooks that serve, a box hook or a filter alone, the library's own intersectors,
+    // lambdas and overload sets, const intersectors with const hooks.
+    STATIC_REQUIRE(mistake<bvh_costs, mesh_bvh> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<bvh_costs, three_level> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<bvh_costs, triangle> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<alpha_mask_without_using, mesh_bvh> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<box_counter_without_using, mesh_bvh> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<filter_only, mesh_bvh> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<canopy::default_intersector, mesh_bvh> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<canopy::default_intersector const, canopy::sphere> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<canopy::moller_trumbore_intersector, canopy::bvh<dtriangle>, dray> == intersector_mistake::none);
+    // moller_trumbore_intersector says `using`: over spheres its triangle hook is simply not needed.
+    STATIC_REQUIRE(mistake<canopy::moller_trumbore_intersector, canopy::bvh<canopy::sphere>> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<const_alpha_mask const, three_level> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<scalar_ray_hook, mesh_bvh> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<bvh_costs, mesh_bvh, packet_ray> == intersector_mistake::none);
+    STATIC_REQUIRE(mistake<float_box_hook_only, triangle> == intersector_mistake::none);
+    auto lambda = [](auto const& r, triangle const& tri) { return intersect(r, tri); };
+    STATIC_REQUIRE(mistake<decltype(lambda), mesh_bvh> == intersector_mistake::none);
+    auto generic = [](auto const& r, auto const& p) { return intersect(r, p); };
+    STATIC_REQUIRE(mistake<decltype(generic), three_level> == intersector_mistake::none);
+
+    // Mistakes.
+    STATIC_REQUIRE(mistake<alpha_mask const, mesh_bvh> == intersector_mistake::const_hooks_not_const);
+    STATIC_REQUIRE(mistake<bvh_costs const, triangle> == intersector_mistake::const_hooks_not_const);
+    STATIC_REQUIRE(mistake<non_const_filter const, mesh_bvh> == intersector_mistake::const_hooks_not_const);
+    STATIC_REQUIRE(mistake<filter_returning_a_record, mesh_bvh> == intersector_mistake::filter_result);
+    STATIC_REQUIRE(mistake<box_hook_returning_bool, mesh_bvh> == intersector_mistake::box_result);
+    STATIC_REQUIRE(mistake<bvh_costs, canopy::bvh<dtriangle>, dray> == intersector_mistake::other_precision);
+    STATIC_REQUIRE(mistake<float_box_hook_only, canopy::bvh<dtriangle>, dray> == intersector_mistake::other_precision);
+    STATIC_REQUIRE(mistake<scalar_ray_hook, mesh_bvh, packet_ray> == intersector_mistake::scalar_hooks_for_packets);
+    // The forgotten using-declaration is fine where a hook serves, a mistake where none does.
+    STATIC_REQUIRE(mistake<alpha_mask_without_using, canopy::bvh<canopy::sphere>> == intersector_mistake::no_usable_hook);
+    auto swapped = [](triangle const& tri, auto const& r) { return intersect(r, tri); };
+    STATIC_REQUIRE(mistake<decltype(swapped), mesh_bvh> == intersector_mistake::swapped_parameters);
+    auto sphere_only = [](auto const& r, canopy::sphere const& s) { return intersect(r, s); };
+    STATIC_REQUIRE(mistake<decltype(sphere_only), mesh_bvh> == intersector_mistake::no_usable_hook);
+}
+
+TEST_CASE("a const intersector with const hooks and a const filter has them called, at every level") {
+    nested_scene const scene(121);
+    random_source rng(122);
+    unsigned hooks = 0, boxes = 0, filtered = 0;
+    const_alpha_mask const isect{{}, &hooks, &boxes, &filtered};
+    int hits = 0, differ_from_default = 0;
+    for (ray const& r : random_rays(rng, scene.top.bounds(), 300)) {
+        alpha_mask_filtered reference;
+        auto const a = canopy::closest_hit(r, &scene.top, &scene.top + 1, isect);
+        auto const b = canopy::closest_hit(r, &scene.top, &scene.top + 1, reference);
+        CHECK(same_record(a, b));
+        CHECK(canopy::any_hit(r, &scene.top, &scene.top + 1, isect).hit ==
+              canopy::any_hit(r, &scene.top, &scene.top + 1, reference).hit);
+        hits += a.hit;
+        differ_from_default += !same_record(a, canopy::closest_hit(r, &scene.top, &scene.top + 1));
+    }
+    CHECK(hits > 50);
+    CHECK(differ_from_default > 10); // the mask and the filter acted
+    CHECK(hooks > 1000u);
+    CHECK(boxes > 1000u);
+    CHECK(filtered > 0u);
+}
+
+TEST_CASE("an instance with a transform that has no inverse is refused when it is made") {
+    mesh_bvh const b = canopy::build_binned_sah(stacked_triangles());
+    using xf = canopy::affine_transform<float>;
+    auto const refused = [&](xf const& t, std::uint32_t id) -> std::string {
+        try {
+            mesh_instance const inst(b, t, id);
+            return "accepted";
+        } catch (std::invalid_argument const& e) {
+            return e.what();
+        }
+    };
+    // Rank 2: the third row is the sum of the first two.
+    CHECK(refused(xf::from_rows({1, 0, 0, 0, 0, 1, 0, 0, 1, 1, 0, 0}), 4) ==
+          "canopy::instance 4: the object-to-world transform is singular (determinant 0): it has no inverse, "
+          "so rays cannot enter the instance");
+    CHECK(refused(xf::from_rows({0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0, 3}), 5) ==
+          "canopy::instance 5: the object-to-world transform is singular (determinant 0): it has no inverse, "
+          "so rays cannot enter the instance");
+    float const nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    CHECK(refused(xf::from_rows({1, 0, 0, nan, 0, 1, 0, 0, 0, 0, 1, 0}), 6) ==
+          "canopy::instance 6: the object-to-world transform has a NaN or infinite entry");
+    CHECK(refused(xf::from_rows({1, 0, 0, 0, 0, inf, 0, 0, 0, 0, 1, 0}), 7) ==
+          "canopy::instance 7: the object-to-world transform has a NaN or infinite entry");
+    // Invertible in double, but the inverse (1e39 on the diagonal) overflows float.
+    CHECK(refused(xf::from_rows({1e-39f, 0, 0, 0, 0, 1e-39f, 0, 0, 0, 0, 1e-39f, 0}), 8) ==
+          "canopy::instance 8: the object-to-world transform is nearly singular (determinant 1e-117): its inverse "
+          "overflows");
+    // Tiny but invertible scales, and reflections, are accepted.
+    CHECK(refused(xf::from_rows({1e-20f, 0, 0, 0, 0, 1e-20f, 0, 0, 0, 0, 1e-20f, 0}), 9) == "accepted");
+    CHECK(refused(xf::from_rows({-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}), 10) == "accepted");
+}
+
+TEST_CASE("instances stay valid when their BVH moves (a growing vector of BVHs)") {
+    random_source rng(131);
+    auto const soup = triangle_soup(rng, 300, 1.0f, 0.4f);
+    std::vector<mesh_bvh> meshes;
+    meshes.push_back(canopy::build_binned_sah(soup));
+    auto const nodes = meshes[0].wide_nodes.data();
+    std::vector<mesh_instance> placed;
+    for (std::uint32_t k = 0; k < 6; ++k) placed.emplace_back(meshes[0], random_transform(rng, 3.0f), k);
+    // Grow the vector until the first BVH has moved to new storage several times.
+    auto const first_address = &meshes[0];
+    for (int k = 0; k < 40; ++k) meshes.push_back(canopy::build_binned_sah(stacked_triangles()));
+    REQUIRE(&meshes[0] != first_address);
+    REQUIRE(meshes[0].wide_nodes.data() == nodes); // the arrays the instances use stayed in place
+    two_level const top = canopy::build_binned_sah(placed);
+    // Reference: the same instances of a copy of the BVH that never moved (the build is
+    // deterministic): every result bit for bit.
+    mesh_bvh const still = canopy::build_binned_sah(soup);
+    std::vector<mesh_instance> placed_still;
+    for (auto const& inst : placed) placed_still.emplace_back(still, inst.object_to_world, inst.inst_id);
+    two_level const top_still = canopy::build_binned_sah(placed_still);
+    int hits = 0;
+    for (ray const& r : random_rays(rng, top.bounds(), 400)) {
+        auto const hr = canopy::closest_hit(r, &top, &top + 1);
+        CHECK(same_record(hr, canopy::closest_hit(r, &top_still, &top_still + 1)));
+        CHECK(same_records(canopy::multi_hit<3>(r, &top, &top + 1), canopy::multi_hit<3>(r, &top_still, &top_still + 1)));
+        hits += hr.hit;
+    }
+    CHECK(hits > 100);
 }

@@ -283,7 +283,7 @@ TEST_CASE("the procedural mask pattern appears where its rule says") {
 
 namespace {
 
-// A counter written independently of canopy::bvh_costs: an overload set, no base class.
+// A counter written independently of canopy::cost_counter: an overload set, no base class.
 struct test_counter {
     std::uint64_t* boxes;
     std::uint64_t* triangles;
@@ -307,10 +307,10 @@ TEST_CASE("the heat map's total equals the counting intersector's totals") {
     auto const& scene = forest.scene;
     auto const camera = forest_camera(forest);
 
-    // The cost image: per pixel the paper's bvh_costs counts, (boxes, triangles, sum).
+    // The cost image: per pixel the paper's bvh_costs counts (canopy::cost_counter), (boxes, triangles, sum).
     canopy::framebuffer costs(width, height);
     canopy::render_tiles(costs, [&](int x, int y) {
-        canopy::bvh_costs counter;
+        canopy::cost_counter counter;
         scene.closest_hit(pixel_ray(camera, x, y, width, height), counter);
         return vec4<float>(float(counter.num_boxes), float(counter.num_tris),
                            float(counter.num_boxes + counter.num_tris), 1.0f);

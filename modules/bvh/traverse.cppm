@@ -35,6 +35,35 @@ import :storage;
 
 export namespace canopy {
 
+// The arrays that traversal of a BVH reads: heap buffers, which stay where they are when the bvh
+// object moves (std::vector's move constructor keeps its buffer). Instances hold this instead of
+// the bvh's address, so that moving a BVH (a growing std::vector<bvh<...>>) leaves them valid.
+template <typename Prim>
+struct bvh_storage {
+    using value_type = typename bvh<Prim>::value_type;
+    using leaf_type = std::conditional_t<stores_triangle_blocks_v<Prim>, triangle_block, Prim>;
+    // Vector growth moves bvh objects (keeping their buffers) only if the move cannot throw.
+    static_assert(std::is_nothrow_move_constructible_v<bvh<Prim>>);
+
+    bvh_storage() = default;
+    inline explicit bvh_storage(bvh<Prim> const& b) {
+        if (b.nodes.empty() || b.wide_nodes.empty()) return;
+        root = b.nodes.data();
+        wide_nodes = b.wide_nodes.data();
+        if constexpr (stores_triangle_blocks_v<Prim>)
+            leaves = b.blocks.data();
+        else
+            leaves = b.primitives.data();
+    }
+
+    inline bool empty() const { return root == nullptr; }
+    inline basic_aabb<value_type> bounds() const { return root == nullptr ? basic_aabb<value_type>{} : root->bounds; }
+
+    bvh_node<value_type> const* root = nullptr; // the binary root; nullptr for an empty BVH
+    wide_bvh_node<value_type> const* wide_nodes = nullptr;
+    leaf_type const* leaves = nullptr; // the leaves' triangle blocks, or their primitives
+};
+
 namespace detail {
 
 // Hit children of a wide node: bit i of mask set when child i is hit, entry distance in tnear[i]
@@ -170,7 +199,7 @@ struct node_tester<T, S, I> {
 // cache, so that the loads of all of them overlap with each other and with the work on the
 // current node, instead of each waiting for memory when its turn comes.
 template <typename Prim, typename S>
-[[gnu::always_inline]] inline void prefetch_children(bvh<Prim> const& b, wide_bvh_node<S> const& node,
+[[gnu::always_inline]] inline void prefetch_children(bvh_storage<Prim> const& b, wide_bvh_node<S> const& node,
                                                      std::uint32_t mask) {
     constexpr std::uintptr_t line = 64;
     for (; mask != 0; mask &= mask - 1) {
@@ -181,10 +210,10 @@ template <typename Prim, typename S>
             for (std::size_t k = 0; k < sizeof(wide_bvh_node<S>); k += line) __builtin_prefetch(p + k);
         } else if constexpr (stores_triangle_blocks_v<Prim>) {
             // The leaf's first block (most leaves have one): aligned, three lines.
-            auto const* p = reinterpret_cast<char const*>(&b.blocks[node.child[i]]);
+            auto const* p = reinterpret_cast<char const*>(&b.leaves[node.child[i]]);
             for (std::size_t k = 0; k < sizeof(triangle_block); k += line) __builtin_prefetch(p + k);
         } else {
-            auto const begin = reinterpret_cast<std::uintptr_t>(&b.primitives[node.child[i]]);
+            auto const begin = reinterpret_cast<std::uintptr_t>(&b.leaves[node.child[i]]);
             auto const end = begin + node.count[i] * sizeof(Prim);
             for (std::uintptr_t a = begin & ~(line - 1); a < end; a += line)
                 __builtin_prefetch(reinterpret_cast<void const*>(a));
@@ -266,18 +295,18 @@ template <bool near_first, typename S>
 // The ray's triangle shear is prepared at its first leaf: rays that reach none (misses, and every
 // ray of BVHs of instances or of BVHs) never compute it.
 template <typename T, typename Prim, typename I, typename Query>
-[[gnu::always_inline]] inline bool visit_leaf(prepared_ray<T>& ray, bvh<Prim> const& b, std::uint32_t first,
+[[gnu::always_inline]] inline bool visit_leaf(prepared_ray<T>& ray, bvh_storage<Prim> const& b, std::uint32_t first,
                                               std::uint32_t count, I& isect, Query& query) {
     if constexpr (!acceleration_structure<Prim>)
         if (!ray.has_shear) ray.prepare_shear();
     if constexpr (stores_triangle_blocks_v<Prim>) {
         int remaining = int(count);
         for (std::uint32_t k = first; remaining > 0; ++k, remaining -= triangle_block_width)
-            if (call_hooks_or_descend(ray, b.blocks[k], std::min(remaining, triangle_block_width), isect, query))
+            if (call_hooks_or_descend(ray, b.leaves[k], std::min(remaining, triangle_block_width), isect, query))
                 return true;
     } else {
         for (std::uint32_t i = first, end = first + count; i < end; ++i)
-            if (call_hooks_or_descend(ray, b.primitives[i], isect, query)) return true;
+            if (call_hooks_or_descend(ray, b.leaves[i], isect, query)) return true;
     }
     return false;
 }
@@ -287,9 +316,9 @@ template <typename T, typename Prim, typename I, typename Query>
 // Traverses b with a prepared ray; returns true when the query asked to stop (any-hit found,
 // packet finished). ray.tmax is tightened as the query allows.
 template <typename T, typename Prim, typename I, typename Query>
-[[gnu::always_inline]] inline bool traverse(prepared_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
+[[gnu::always_inline]] inline bool traverse(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect, Query& query) {
     using S = typename bvh<Prim>::value_type;
-    if (b.wide_nodes.empty()) return false;
+    if (b.empty()) return false;
     if constexpr (std::is_base_of_v<instance_path, Query>) ray.instances = &query;
     detail::node_tester<T, S, I> nodes(ray, isect);
     detail::traversal_stack<S> stack;
@@ -314,12 +343,18 @@ template <typename T, typename Prim, typename I, typename Query>
 // Traverses b with a plain ray (prepared here, once; the triangle shear waits for the first leaf);
 // ray.tmax is tightened as the query allows.
 template <typename T, typename Prim, typename I, typename Query>
-[[gnu::always_inline]] inline bool traverse(basic_ray<T>& ray, bvh<Prim> const& b, I& isect, Query& query) {
+[[gnu::always_inline]] inline bool traverse(basic_ray<T>& ray, bvh_storage<Prim> const& b, I& isect, Query& query) {
     prepared_ray<T> prepared(ray, false);
     prepared.widen_box_tests_for(b.bounds());
     bool const stop = traverse(prepared, b, isect, query);
     ray.tmax = prepared.tmax;
     return stop;
+}
+
+// The same for a bvh object, with a prepared or a plain ray.
+template <typename Ray, typename Prim, typename I, typename Query>
+[[gnu::always_inline]] inline bool traverse(Ray& ray, bvh<Prim> const& b, I& isect, Query& query) {
+    return traverse(ray, bvh_storage<Prim>(b), isect, query);
 }
 
 } // namespace canopy
