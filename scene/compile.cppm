@@ -282,6 +282,8 @@ public:
                    " placements have the identity transform: not applied");
 
         c.camera = camera_;
+        c.camera_file = camera_file_;
+        c.camera_node = camera_node_;
         c.lights = lights_;
         c.build(o_.bvh);
         stats_.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -345,6 +347,8 @@ private:
                     c.up = vec3<float>(xf.transform_vector(vec3<double>(c.up)));
                 }
                 camera_ = c;
+                camera_file_ = nd.source.empty() ? o_.name : nd.source;
+                camera_node_ = node_label(s_, n);
             }
             break;
         case node_kind::light:
@@ -446,6 +450,7 @@ private:
     std::set<std::uint32_t> empty_meshes_;
     std::size_t direct_single_mesh_ = 0;
     std::optional<camera_data> camera_;
+    std::string camera_file_, camera_node_;
     std::vector<light_data> lights_;
 };
 
