@@ -1,4 +1,5 @@
-// canopy.render — cameras, ray generation, a parallel tile scheduler and rendering kernels.
+// canopy.render — cameras (refusing degenerate ones), ray generation, a parallel tile scheduler,
+// rendering kernels and tone curves.
 //
 // Every kernel is a function template over the scene and the custom intersector (the paper's
 // "scheduling parameters"): the same kernel runs with no intersector, an alpha mask or a cost

@@ -465,7 +465,7 @@ TEST_CASE("look_at refuses values that give no camera, and says why") {
     }
 }
 
-TEST_CASE("look_at's basis is orthonormal; an up along the view falls back to +y, or -z looking along y") {
+TEST_CASE("look_at's basis is orthonormal, and an up along the view falls back to +y, or -z looking along y") {
     auto const unit = [](vec3<float> v) { return std::fabs(double(canopy::length(v)) - 1.0) < 1e-6; };
     struct view {
         vec3<float> eye, target, up;
@@ -498,7 +498,7 @@ TEST_CASE("look_at's basis is orthonormal; an up along the view falls back to +y
     }
 }
 
-TEST_CASE("tone curves follow their formulas; none at scale 1 leaves values as they are") {
+TEST_CASE("tone curves follow their formulas, and none at scale 1 leaves values as they are") {
     using canopy::tone_curve;
     float const nan = std::numeric_limits<float>::quiet_NaN();
     float const inf = std::numeric_limits<float>::infinity();

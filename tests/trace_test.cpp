@@ -719,7 +719,7 @@ TEST_CASE("canopy trace refuses inputs that are not regular files or hold nothin
         {f.obj.string(), (f.folder.path / "empty.rays").string(), "empty.rays: holds no rays (the file is empty): nothing to trace"},
         {(f.folder.path / "points.obj").string(), f.mesh_rays_file.string(), "points.obj: holds no triangles: nothing to trace"},
         {(f.folder.path / "none.inst").string(), f.mesh_rays_file.string(), "none.inst: holds no instances: nothing to trace"},
-        {f.folder.path.string(), f.mesh_rays_file.string(), "is a folder, not a regular file (scene)"},
+        {(f.folder.path / "folder.rays" / "x.obj").string(), f.mesh_rays_file.string(), "x.obj: file not found (scene)"},
     };
     for (auto const& input : inputs) {
         INFO(input.scene << " " << input.rays);
@@ -759,7 +759,7 @@ TEST_CASE("canopy render checks its output folder and images before loading, and
     CHECK_FALSE(fs::exists(folder.path / "taken" / "1_billboards_alpha_ignored.png"));
 }
 
-TEST_CASE("canopy trace checks its hit file before tracing and after closing it; standard output at exit") {
+TEST_CASE("canopy trace checks its hit file before tracing and after closing it, and standard output at exit") {
     trace_fixture const f;
     auto const trace_to = [&](std::string const& out) {
         return run_canopy({"trace", "--scene", f.obj.string(), "--rays", f.mesh_rays_file.string(), "--query", "any",
@@ -945,7 +945,7 @@ TEST_CASE("canopy render --kernel ao between two planes matches the analytic ope
     }
 }
 
-TEST_CASE("canopy render --exposure and --tonemap follow their formulas; path defaults to aces") {
+TEST_CASE("canopy render --exposure and --tonemap follow their formulas, and path defaults to aces") {
     temp_folder const folder("canopy_cli_tone_test");
     // A white floor seen from above at an angle: lit by the sun, radiance above 1.
     auto const file = folder.write("white.json",
@@ -997,4 +997,22 @@ TEST_CASE("canopy render --exposure and --tonemap follow their formulas; path de
     CHECK(path_over_one > 0);
     CHECK(aces_errors == 0);
     CHECK(aces_clipped == 0);
+}
+
+TEST_CASE("canopy render: bounds beyond float range give no AO radius and no default point light") {
+    temp_folder const folder("canopy_cli_bounds_test");
+    auto const file = folder.write("huge.json", scene_with({floor_quad("floor", 3e38f, 0.0f)}, "",
+                                                           R"({"type": "camera", "eye": [0, 5, 5]})"));
+    auto const ao = run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "8x8", "--kernel", "ao"});
+    CHECK(ao.exit_code == 1);
+    CHECK_THAT(ao.output, Catch::Contains(file.string() + ": the AO radius, 5% of the bounding-box diagonal (inf), is "
+                                                          "not a positive finite length: give --ao-radius in scene units"));
+    auto const path = run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "8x8", "--kernel", "path"});
+    CHECK(path.exit_code == 1);
+    CHECK_THAT(path.output, Catch::Contains(file.string() + ": the bounding box (diagonal inf) is beyond float range for "
+                                                            "the default point light of the path kernel: give the scene a point light"));
+    CHECK_FALSE(fs::exists(folder.path / "huge.png"));
+    // With a radius given, the AO image is made.
+    CHECK(run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "8x8", "--kernel", "ao",
+                      "--ao-radius", "1"}).exit_code == 0);
 }

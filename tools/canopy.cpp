@@ -254,11 +254,11 @@ void apply_limits(arguments const& args) {
     if (args.has("--max-depth")) limits.max_depth = whole_option(args, "--max-depth", 1, most);
 }
 
-std::optional<tbb::global_control> thread_limit(arguments const& args) {
-    std::optional<tbb::global_control> threads;
+// --threads N: the worker limit, kept in `control` (constructed in place: a global_control must
+// not be copied) for as long as the caller keeps it.
+void limit_threads(arguments const& args, std::optional<tbb::global_control>& control) {
     if (args.has("--threads"))
-        threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(whole_option(args, "--threads", 1, 1024)));
-    return threads;
+        control.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(whole_option(args, "--threads", 1, 1024)));
 }
 
 // ---- output files ----------------------------------------------------------------------------
@@ -306,6 +306,8 @@ struct loaded_scene {
 std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path) {
     auto scene = std::make_unique<loaded_scene>();
     auto const ext = path.extension().string();
+    if (ext != ".obj" && ext != ".inst")
+        throw canopy::scene_error(path.string(), "", "unknown scene extension " + quote(ext) + " (expected .obj or .inst)");
     step("loading " + path.string());
     canopy::require_regular_file(path, "scene");
     if (ext == ".obj") {
@@ -328,8 +330,6 @@ std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path
         scene->top = canopy::build_binned_sah(scene->instances);
         scene->build_seconds = seconds_since(start);
         scene->instanced = true;
-    } else {
-        throw canopy::scene_error(path.string(), "", "unknown scene extension " + quote(ext) + " (expected .obj or .inst)");
     }
     return scene;
 }
@@ -357,7 +357,8 @@ int run_trace(std::span<char*> all_args) {
     }
     if (!args.positional.empty()) throw usage_error("unexpected argument " + quote(args.positional.front()));
     apply_limits(args);
-    auto const threads = thread_limit(args);
+    std::optional<tbb::global_control> threads;
+    limit_threads(args, threads);
     std::string const scene_path = required(args, "--scene");
     std::string const rays_path = required(args, "--rays");
     std::string const out_path = required(args, "--out");
@@ -856,7 +857,8 @@ int run_render(std::span<char*> all_args) {
     }
     base.spp = base.kernel == "ao" || base.kernel == "path" ? 16 : 1;
     if (args.has("--spp")) base.spp = int(whole_option(args, "--spp", 1, 65536));
-    auto const threads = thread_limit(args);
+    std::optional<tbb::global_control> threads;
+    limit_threads(args, threads);
     std::filesystem::path const out = args.value_or("-o", "out");
     float const aspect = float(base.width) / float(base.height);
 
