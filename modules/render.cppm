@@ -71,11 +71,12 @@ struct pinhole_camera {
     }
 
 private:
-    static std::string text(vec3<float> v) {
-        char buffer[96];
-        std::snprintf(buffer, sizeof buffer, "(%g, %g, %g)", double(v.x), double(v.y), double(v.z));
+    static std::string text(float f) {
+        char buffer[32];
+        std::snprintf(buffer, sizeof buffer, "%g", double(f));
         return buffer;
     }
+    static std::string text(vec3<float> v) { return "(" + text(v.x) + ", " + text(v.y) + ", " + text(v.z) + ")"; }
 
     static bool unit(vec3<float> v) {
         double const l = std::sqrt(double(v.x) * double(v.x) + double(v.y) * double(v.y) + double(v.z) * double(v.z));
@@ -87,9 +88,9 @@ private:
         if (!all_finite(eye)) return "eye " + text(eye) + " is not finite";
         if (!all_finite(target)) return "target " + text(target) + " is not finite";
         if (!all_finite(up_hint)) return "up " + text(up_hint) + " is not finite";
-        if (!(fovy > 0.0f && fovy < 180.0f)) return "field of view " + std::to_string(fovy) + " is not in (0, 180) degrees";
+        if (!(fovy > 0.0f && fovy < 180.0f)) return "field of view " + text(fovy) + " is not in (0, 180) degrees";
         if (!(aspect > 0.0f && aspect < std::numeric_limits<float>::infinity()))
-            return "aspect ratio " + std::to_string(aspect) + " is not a positive number";
+            return "aspect ratio " + text(aspect) + " is not a positive number";
         vec3<float> const view = target - eye;
         if (eye.x == target.x && eye.y == target.y && eye.z == target.z)
             return "eye and target coincide at " + text(eye) + ": no view direction";
@@ -112,8 +113,7 @@ private:
         c.up = u * half_height;
         c.right = r * (half_height * aspect);
         if (!all_finite(c.up) || !all_finite(c.right) || !unit(r) || !unit(u))
-            return "the camera's basis is not finite (field of view " + std::to_string(fovy) + ", aspect " +
-                   std::to_string(aspect) + ")";
+            return "the camera's basis is not finite (field of view " + text(fovy) + ", aspect " + text(aspect) + ")";
         return {};
     }
 };

@@ -659,6 +659,7 @@ TEST_CASE("canopy refuses unknown, repeated and value-less options and stray arg
         {{"render", "--max-triangles", ""}, "option --max-triangles has an empty value"},
         {{"trace", "stray", "--scene", "a.obj"}, "unexpected argument 'stray'"},
         {{"info", "a.obj", "b.obj"}, "info takes one scene, not 2"},
+        {{"render", ""}, "an empty argument (a file name was expected)"},
     });
 }
 

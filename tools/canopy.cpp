@@ -185,6 +185,7 @@ arguments parse_arguments(std::span<char*> args, std::vector<option_spec> specs)
     for (std::size_t i = 0; i < args.size(); ++i) {
         std::string const a = args[i];
         if (options_ended || a.size() < 2 || a[0] != '-') {
+            if (a.empty()) throw usage_error("an empty argument (a file name was expected)");
             out.positional.push_back(a);
             continue;
         }
