@@ -1,4 +1,5 @@
-// canopy.render — cameras, ray generation, a parallel tile scheduler and rendering kernels.
+// canopy.render — cameras (refusing degenerate ones), ray generation, a parallel tile scheduler,
+// rendering kernels and tone curves.
 //
 // Every kernel is a function template over the scene and the custom intersector (the paper's
 // "scheduling parameters"): the same kernel runs with no intersector, an alpha mask or a cost
@@ -20,9 +21,12 @@ module;
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <stdexcept>
+#include <string>
 #include <vector>
 export module canopy.render;
 export import canopy.query;
@@ -37,17 +41,26 @@ struct pinhole_camera {
     vec3<float> right;   // scaled: half the image width at distance 1
     vec3<float> up;      // scaled: half the image height at distance 1
 
-    // fovy in degrees; aspect = width / height.
+    // fovy in degrees; aspect = width / height. Throws std::invalid_argument with look_at_problem's
+    // text when the values give no camera. An up hint parallel to the view direction (within
+    // 0.06°) is no error: the fallback up is then +y, or -z when the view is along ±y (looking
+    // straight down, the top of the image is towards -z).
     static pinhole_camera look_at(vec3<float> eye, vec3<float> target, vec3<float> up_hint, float fovy, float aspect) {
         pinhole_camera c;
-        c.eye = eye;
-        c.forward = normalize(target - eye);
-        vec3<float> const r = normalize(cross(c.forward, up_hint));
-        vec3<float> const u = cross(r, c.forward);
-        float const half_height = std::tan(fovy * std::numbers::pi_v<float> / 360.0f);
-        c.up = u * half_height;
-        c.right = r * (half_height * aspect);
+        std::string const problem = build(c, eye, target, up_hint, fovy, aspect);
+        if (!problem.empty()) throw std::invalid_argument("camera: " + problem);
         return c;
+    }
+
+    // Why look_at cannot make a camera of these values, in plain words; empty when it can. The
+    // basis is computed in float as the renderer uses it, and refused unless it is finite and
+    // orthonormal: a value that is not finite, a field of view outside (0°, 180°), a bad aspect,
+    // eye and target that coincide or are too close (or too far apart) for a float direction (a
+    // camera under a scale of 1e-30), an up hint of zero or underflowing length.
+    static std::string look_at_problem(vec3<float> eye, vec3<float> target, vec3<float> up_hint, float fovy,
+                                       float aspect) {
+        pinhole_camera c;
+        return build(c, eye, target, up_hint, fovy, aspect);
     }
 
     // Ray through image position (px, py) in pixels, (0, 0) the top-left corner of the image.
@@ -55,6 +68,53 @@ struct pinhole_camera {
         float const sx = 2.0f * px / float(width) - 1.0f;
         float const sy = 1.0f - 2.0f * py / float(height);
         return {eye, 0.0f, forward + right * sx + up * sy, std::numeric_limits<float>::infinity()};
+    }
+
+private:
+    static std::string text(float f) {
+        char buffer[32];
+        std::snprintf(buffer, sizeof buffer, "%g", double(f));
+        return buffer;
+    }
+    static std::string text(vec3<float> v) { return "(" + text(v.x) + ", " + text(v.y) + ", " + text(v.z) + ")"; }
+
+    static bool unit(vec3<float> v) {
+        double const l = std::sqrt(double(v.x) * double(v.x) + double(v.y) * double(v.y) + double(v.z) * double(v.z));
+        return std::fabs(l - 1.0) <= 1e-5;
+    }
+
+    static std::string build(pinhole_camera& c, vec3<float> eye, vec3<float> target, vec3<float> up_hint, float fovy,
+                             float aspect) {
+        if (!all_finite(eye)) return "eye " + text(eye) + " is not finite";
+        if (!all_finite(target)) return "target " + text(target) + " is not finite";
+        if (!all_finite(up_hint)) return "up " + text(up_hint) + " is not finite";
+        if (!(fovy > 0.0f && fovy < 180.0f)) return "field of view " + text(fovy) + " is not in (0, 180) degrees";
+        if (!(aspect > 0.0f && aspect < std::numeric_limits<float>::infinity()))
+            return "aspect ratio " + text(aspect) + " is not a positive number";
+        vec3<float> const view = target - eye;
+        if (eye.x == target.x && eye.y == target.y && eye.z == target.z)
+            return "eye and target coincide at " + text(eye) + ": no view direction";
+        if (!all_finite(view)) return "eye " + text(eye) + " and target " + text(target) + " are too far apart for float";
+        c.eye = eye;
+        c.forward = normalize(view);
+        if (!all_finite(c.forward) || !unit(c.forward))
+            return "eye " + text(eye) + " and target " + text(target) +
+                   " are too close to give a view direction in float (a collapsed camera)";
+        if (up_hint.x == 0.0f && up_hint.y == 0.0f && up_hint.z == 0.0f) return "up is zero: no orientation";
+        vec3<float> const up_direction = normalize(up_hint);
+        if (!all_finite(up_direction) || !unit(up_direction))
+            return "up " + text(up_hint) + " has no direction in float (its length under- or overflows)";
+        vec3<float> up = up_hint;
+        if (length(cross(c.forward, up_direction)) < 1e-3f)
+            up = std::fabs(c.forward.y) < 0.9f ? vec3<float>(0.0f, 1.0f, 0.0f) : vec3<float>(0.0f, 0.0f, -1.0f);
+        vec3<float> const r = normalize(cross(c.forward, up));
+        vec3<float> const u = cross(r, c.forward);
+        float const half_height = std::tan(fovy * std::numbers::pi_v<float> / 360.0f);
+        c.up = u * half_height;
+        c.right = r * (half_height * aspect);
+        if (!all_finite(c.up) || !all_finite(c.right) || !unit(r) || !unit(u))
+            return "the camera's basis is not finite (field of view " + text(fovy) + ", aspect " + text(aspect) + ")";
+        return {};
     }
 };
 
@@ -230,6 +290,32 @@ inline vec3<float> heat_colour(float cost, float max_cost) {
 }
 
 // ---- display ------------------------------------------------------------------------------
+
+// Tone curves from scaled linear radiance to display-linear values in [0, 1], per channel:
+//   none      clips at 1 (the primary and AO kernels give values in [0, 1] or a little above)
+//   reinhard  x / (1 + x)                                  (Reinhard et al. 2002, eq. 3)
+//   aces      x(2.51x + 0.03) / (x(2.43x + 0.59) + 0.14)   (Narkowicz 2015, fit of the ACES
+//             filmic curve; reaches 1 at x ≈ 7.2)
+enum class tone_curve { none, reinhard, aces };
+
+// `scale` is the exposure as a factor (2^EV). NaN stays NaN (to be counted, not hidden); +∞ and
+// values over 1e6 map like 1e6.
+inline float tone_map(float linear, tone_curve curve, float scale = 1.0f) {
+    float const x = linear * scale;
+    switch (curve) {
+    case tone_curve::none: return x;
+    case tone_curve::reinhard: {
+        float const c = std::clamp(x, 0.0f, 1e6f);
+        return c / (1.0f + c);
+    }
+    case tone_curve::aces: {
+        float const c = std::clamp(x, 0.0f, 1e6f);
+        float const y = c * (2.51f * c + 0.03f) / (c * (2.43f * c + 0.59f) + 0.14f);
+        return y > 1.0f ? 1.0f : y;
+    }
+    }
+    return x;
+}
 
 // Linear → sRGB-encoded display value in [0, 1].
 inline float to_srgb(float linear) {

@@ -384,6 +384,8 @@ public:
                    " placements have the identity transform: not applied");
 
         c.camera = camera_;
+        c.camera_file = camera_file_;
+        c.camera_node = camera_node_;
         c.lights = lights_;
         c.build(o_.bvh);
         stats_.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -633,6 +635,8 @@ private:
         if (c.eye.x == c.target.x && c.eye.y == c.target.y && c.eye.z == c.target.z)
             fail(n, "placed by the transforms above it, the camera's eye and target coincide in float");
         camera_ = c;
+        camera_file_ = file_of(n);
+        camera_node_ = node_label(s_, n);
     }
 
     void place_light(node_id n, frame const& where) {
@@ -777,6 +781,7 @@ private:
     std::set<std::uint32_t> empty_meshes_;
     std::size_t direct_single_mesh_ = 0;
     std::optional<camera_data> camera_;
+    std::string camera_file_, camera_node_;
     std::vector<light_data> lights_;
 };
 

@@ -116,8 +116,10 @@ struct compiled_scene {
     bvh<mesh_instance> top1;
     bvh<group_instance> top2;
 
-    // World-space camera and lights of the scene, when it has them.
+    // World-space camera and lights of the scene, when it has them. camera_file and camera_node
+    // name the camera in messages (its file, and "camera 'main'" or "camera #12").
     std::optional<camera_data> camera;
+    std::string camera_file, camera_node;
     std::vector<light_data> lights;
 
     compile_statistics statistics;

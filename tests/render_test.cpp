@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
+#include <numbers>
 #include <optional>
 #include <string>
 #include <utility>
@@ -425,4 +427,93 @@ TEST_CASE("images are identical for 1 and 2 threads, across runs and tile sizes"
         for (std::size_t i = 1; i < one.pixels.size(); ++i) distinct += one.pixels[i].x != one.pixels[i - 1].x;
         CHECK(distinct > int(one.pixels.size()) / 10);
     }
+}
+
+// ---- cameras and tone curves --------------------------------------------------------------
+
+TEST_CASE("look_at refuses values that give no camera, and says why") {
+    float const inf = std::numeric_limits<float>::infinity();
+    float const nan = std::numeric_limits<float>::quiet_NaN();
+    vec3<float> const eye(0, 0, 5), target(0, 0, 0), up(0, 1, 0);
+    struct bad_camera {
+        vec3<float> eye, target, up;
+        float fovy, aspect;
+        std::string problem;
+    };
+    std::vector<bad_camera> const cameras{
+        {{nan, 0, 5}, target, up, 45, 1, "eye (nan, 0, 5) is not finite"},
+        {eye, {0, inf, 0}, up, 45, 1, "target (0, inf, 0) is not finite"},
+        {eye, target, {0, -inf, 0}, 45, 1, "up (0, -inf, 0) is not finite"},
+        {eye, target, up, 0, 1, "field of view 0 is not in (0, 180) degrees"},
+        {eye, target, up, 180, 1, "field of view 180 is not in (0, 180) degrees"},
+        {eye, target, up, nan, 1, "field of view nan is not in (0, 180) degrees"},
+        {eye, target, up, 45, 0, "aspect ratio 0 is not a positive number"},
+        {eye, target, up, 45, inf, "aspect ratio inf is not a positive number"},
+        {{1, 2, 3}, {1, 2, 3}, up, 45, 1, "eye and target coincide at (1, 2, 3): no view direction"},
+        {eye, target, {0, 0, 0}, 45, 1, "up is zero: no orientation"},
+        // A camera under a scale of 1e-30: the direction's squared length underflows.
+        {{0, 0, 5e-30f}, target, up, 45, 1, "eye (0, 0, 5e-30) and target (0, 0, 0) are too close to give a view direction in float"},
+        {eye, target, {0, 1e-30f, 0}, 45, 1, "up (0, 1e-30, 0) has no direction in float (its length under- or overflows)"},
+        {{-3e38f, 0, 0}, {3e38f, 0, 0}, up, 45, 1, "eye (-3e+38, 0, 0) and target (3e+38, 0, 0) are too far apart for float"},
+    };
+    for (auto const& c : cameras) {
+        INFO(c.problem);
+        CHECK_THAT(canopy::pinhole_camera::look_at_problem(c.eye, c.target, c.up, c.fovy, c.aspect),
+                   Catch::Contains(c.problem));
+        CHECK_THROWS_WITH(canopy::pinhole_camera::look_at(c.eye, c.target, c.up, c.fovy, c.aspect),
+                          Catch::StartsWith("camera: ") && Catch::Contains(c.problem));
+    }
+}
+
+TEST_CASE("look_at's basis is orthonormal, and an up along the view falls back to +y, or -z looking along y") {
+    auto const unit = [](vec3<float> v) { return std::fabs(double(canopy::length(v)) - 1.0) < 1e-6; };
+    struct view {
+        vec3<float> eye, target, up;
+        vec3<float> expected_up; // unit, the image's up direction (written out)
+    };
+    std::vector<view> const views{
+        {{0, 0, 5}, {0, 0, 0}, {0, 1, 0}, {0, 1, 0}},        // the usual case
+        {{0, 0, 5}, {0, 0, 0}, {0, 3, 0}, {0, 1, 0}},        // a long up
+        {{0, 5, 0}, {0, 0, 0}, {0, 1, 0}, {0, 0, -1}},       // straight down, up along the view
+        {{0, -5, 0}, {0, 0, 0}, {0, 2, 0}, {0, 0, -1}},      // straight up
+        {{0, 0, 5}, {0, 0, 0}, {0, 0, 1}, {0, 1, 0}},        // along -z with up +z
+        {{7, 1, 1}, {0, 1, 1}, {-1, 0, 0}, {0, 1, 0}},       // along -x with up -x
+        {{0, 5, 0}, {0, 0, 0}, {0, 1, 1e-5f}, {0, 0, -1}},   // within 0.06° of the view
+    };
+    for (auto const& v : views) {
+        INFO("eye " << v.eye.x << " " << v.eye.y << " " << v.eye.z << ", up " << v.up.x << " " << v.up.y << " " << v.up.z);
+        REQUIRE(canopy::pinhole_camera::look_at_problem(v.eye, v.target, v.up, 60.0f, 2.0f).empty());
+        auto const c = canopy::pinhole_camera::look_at(v.eye, v.target, v.up, 60.0f, 2.0f);
+        double const half_height = std::tan(30.0 * std::numbers::pi / 180.0);
+        vec3<float> const u = c.up * float(1.0 / half_height), r = c.right * float(1.0 / (2.0 * half_height));
+        CHECK(unit(c.forward));
+        CHECK(unit(u));
+        CHECK(unit(r));
+        CHECK(std::fabs(canopy::dot(u, c.forward)) < 1e-6f);
+        CHECK(std::fabs(canopy::dot(r, c.forward)) < 1e-6f);
+        CHECK(std::fabs(canopy::dot(r, u)) < 1e-6f);
+        CHECK(canopy::dot(u, v.expected_up) > 0.999999f);
+        // Right-handed: right = forward × up.
+        CHECK(canopy::dot(canopy::cross(c.forward, u), r) > 0.999999f);
+    }
+}
+
+TEST_CASE("tone curves follow their formulas, and none at scale 1 leaves values as they are") {
+    using canopy::tone_curve;
+    float const nan = std::numeric_limits<float>::quiet_NaN();
+    float const inf = std::numeric_limits<float>::infinity();
+    for (float const x : {0.0f, 0.001f, 0.18f, 0.5f, 1.0f, 1.25f, 2.0f, 7.0f, 100.0f}) {
+        INFO("x = " << x);
+        double const v = double(x) * 0.5;
+        CHECK(canopy::tone_map(x, tone_curve::none) == x); // bit for bit: Figure 1 as before
+        CHECK(canopy::tone_map(x, tone_curve::none, 0.5f) == Approx(v).epsilon(1e-7));
+        CHECK(canopy::tone_map(x, tone_curve::reinhard, 0.5f) == Approx(v / (1.0 + v)).epsilon(1e-6));
+        double const aces = std::min(1.0, v * (2.51 * v + 0.03) / (v * (2.43 * v + 0.59) + 0.14));
+        CHECK(canopy::tone_map(x, tone_curve::aces, 0.5f) == Approx(aces).epsilon(1e-6).margin(1e-7));
+    }
+    for (auto const curve : {tone_curve::none, tone_curve::reinhard, tone_curve::aces})
+        CHECK(std::isnan(canopy::tone_map(nan, curve)));
+    CHECK(canopy::tone_map(inf, tone_curve::reinhard) == Approx(1.0).margin(1e-5));
+    CHECK(canopy::tone_map(inf, tone_curve::aces) == 1.0f);
+    CHECK(canopy::tone_map(-1.0f, tone_curve::aces) == 0.0f);
 }

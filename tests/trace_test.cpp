@@ -19,6 +19,7 @@
 #include <random>
 #include <string>
 #include <vector>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -407,7 +408,7 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
         INFO("canopy " << joined);
         auto const result = run_canopy(call.args);
         INFO(result.output);
-        CHECK(result.exit_code != 0);
+        CHECK(result.exit_code == 2);
         CHECK(result.output.find(call.usage) != std::string::npos);
     }
     for (char const* command : {"trace", "render", "info"}) {
@@ -415,6 +416,11 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
         auto const result = run_canopy({command, "--help"});
         CHECK(result.exit_code == 0);
         CHECK(result.output.find(std::string("usage: canopy ") + command) != std::string::npos);
+        // Every command's help names the limit options with their defaults.
+        for (char const* text : {"--max-file-bytes N  bytes of one input file (default 4294967296", "--max-texels N",
+                                 "(default 67108864", "--max-triangles N", "(default 268435456", "--max-placements N",
+                                 "(default 16777216", "--max-depth N", "(default 4096)"})
+            CHECK_THAT(result.output, Catch::Contains(text));
     }
 }
 
@@ -550,4 +556,464 @@ TEST_CASE("canopy render and info name the file, the line and the problem for a 
     auto const unknown = run_canopy({"info", (folder.path / "scene.xyz").string()});
     CHECK(unknown.exit_code == 1);
     CHECK_THAT(unknown.output, Catch::Contains("unknown extension '.xyz'"));
+}
+
+// ---- hostile arguments, limits, outputs and cameras through the command line ----------------
+
+namespace {
+
+// A shell command line for the program: each argument single-quoted.
+std::string canopy_command(std::vector<std::string> const& args) {
+    std::string command = "'" CANOPY_CLI "'";
+    for (auto const& a : args) command += " '" + a + "'";
+    return command;
+}
+
+// sRGB-encoded display value → linear (the inverse of canopy::to_srgb, written out).
+double srgb_to_linear(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
+
+// Mean of the linear R, G and B of every pixel of an 8-bit sRGB image.
+double mean_linear(canopy::rgba_image const& image) {
+    double sum = 0.0;
+    for (int y = 0; y < image.height; ++y)
+        for (int x = 0; x < image.width; ++x)
+            for (int c = 0; c < 3; ++c) sum += srgb_to_linear(double(image.at(x, y)[c]));
+    return sum / (3.0 * double(image.width) * double(image.height));
+}
+
+// A JSON scene: inline meshes (name, material, 12 numbers of a quad's corners in order) and extra
+// nodes.
+struct json_quad {
+    std::string name, material;
+    std::array<float, 12> corners;
+};
+
+std::string scene_with(std::vector<json_quad> const& quads, std::string const& materials, std::string const& nodes) {
+    std::string meshes, placed;
+    for (auto const& q : quads) {
+        std::string positions;
+        for (float f : q.corners) positions += (positions.empty() ? "" : ", ") + number(f);
+        meshes += std::string(meshes.empty() ? "" : ",\n") + "{\"name\": \"" + q.name + "\", " +
+                  (q.material.empty() ? "" : "\"material\": \"" + q.material + "\", ") + "\"positions\": [" +
+                  positions + "], \"indices\": [0, 1, 2, 0, 2, 3]}";
+        placed += std::string(placed.empty() ? "" : ", ") + "{\"type\": \"mesh\", \"mesh\": \"" + q.name + "\"}";
+    }
+    return "{\"materials\": [" + materials + "],\n\"meshes\": [" + meshes + "],\n\"nodes\": [" + placed +
+           (nodes.empty() ? "" : ", " + nodes) + "]}\n";
+}
+
+// A horizontal square [-s, s]² at height y, facing up.
+json_quad floor_quad(std::string name, float s, float y, std::string material = {}) {
+    return {std::move(name), std::move(material), {-s, y, -s, -s, y, s, s, y, s, s, y, -s}};
+}
+
+} // namespace
+
+namespace {
+
+struct bad_call {
+    std::vector<std::string> args;
+    std::string message;
+};
+
+// Each call exits with status 2, the message and the command's usage.
+void check_usage_errors(std::vector<bad_call> const& calls) {
+    for (auto const& call : calls) {
+        std::string joined;
+        for (auto const& a : call.args) joined += a + " ";
+        INFO("canopy " << joined);
+        auto const result = run_canopy(call.args);
+        INFO(result.output);
+        CHECK(result.exit_code == 2);
+        CHECK_THAT(result.output, Catch::Contains(call.message));
+        CHECK_THAT(result.output, Catch::Contains("usage: canopy " + call.args[0]));
+    }
+}
+
+} // namespace
+
+TEST_CASE("canopy reads every number whole and in range, naming the option and the range (exit 2)") {
+    check_usage_errors({
+        {{"render", "--size", "64x48junk"},
+         "--size must be WxH with W and H whole numbers from 1 to 16384 (e.g. 800x600), not '64x48junk'"},
+        {{"render", "--spp", "1e9"}, "--spp must be a whole number from 1 to 65536, not '1e9'"},
+        {{"render", "--spp", "4294967297"}, "--spp must be a whole number from 1 to 65536, not '4294967297'"},
+        {{"trace", "--threads", "2x"}, "--threads must be a whole number from 1 to 1024, not '2x'"},
+        {{"render", "--exposure", "nan"}, "--exposure must be a number of stops from -30 to 30, not 'nan'"},
+        {{"render", "--kernel", "ao", "--ao-radius", "-2%"}, "--ao-radius must be a number over 0"},
+        {{"info", "x.obj", "--max-texels", "12k"},
+         "--max-texels must be a whole number from 1 to 18446744073709551615, not '12k'"},
+        {{"render", "--size", "100x100", "--max-texels", "9999"},
+         "--size 100x100 is 10000 pixels, over the limit of 9999 (--max-texels)"},
+        // A long argument is quoted by its first 40 characters.
+        {{"render", "--spp", std::string(300, '9')}, "not '" + std::string(40, '9') + "...'"},
+    });
+}
+
+TEST_CASE("canopy refuses unknown, repeated and value-less options and stray arguments (exit 2)") {
+    check_usage_errors({
+        {{"render", "--size=64x48"}, "unknown option '--size=64x48'"},
+        {{"render", "--spp"}, "option --spp needs a value"},
+        {{"render", "--spp", "2", "--spp", "3"}, "option --spp given more than once"},
+        {{"render", "-o", "--size", "3x3"}, "option -o needs a value, not the option '--size'"},
+        {{"render", "--max-triangles", ""}, "option --max-triangles has an empty value"},
+        {{"trace", "stray", "--scene", "a.obj"}, "unexpected argument 'stray'"},
+        {{"info", "a.obj", "b.obj"}, "info takes one scene, not 2"},
+        {{"render", ""}, "an empty argument (a file name was expected)"},
+    });
+}
+
+TEST_CASE("canopy render refuses options that would be ignored (exit 2)") {
+    check_usage_errors({
+        {{"render", "--intersector", "alpha"}, "--intersector applies to a SCENE"},
+        {{"render", "s.obj", "--kernel", "ao", "--intersector", "costs"}, "--intersector costs draws the heat map"},
+        {{"render", "s.obj", "--kernel", "heatmap", "--tonemap", "aces"}, "not to the heat map"},
+        {{"render", "--ao-radius", "2"}, "--ao-radius applies to --kernel ao"},
+        {{"render", "gen:sphere:subdivisions=2,subdivisions=3"},
+         "generator parameter 'subdivisions' given more than once"},
+    });
+}
+
+TEST_CASE("canopy's limit options are set before anything is loaded") {
+    temp_folder const folder("canopy_cli_limits_test");
+    auto const scene = folder.write("pairs.json", scene_json);
+    std::string const size = std::to_string(fs::file_size(scene));
+    std::string const limit = std::to_string(fs::file_size(scene) - 1);
+    auto const render = run_canopy({"render", scene.string(), "--max-file-bytes", limit, "-o", folder.path.string()});
+    CHECK(render.exit_code == 1);
+    CHECK_THAT(render.output, Catch::Contains(scene.string() + ": is " + size + " bytes, over the limit of " + limit +
+                                              " bytes per file (--max-file-bytes)"));
+    CHECK_FALSE(fs::exists(folder.path / "pairs.png"));
+    auto const info = run_canopy({"info", scene.string(), "--max-file-bytes", limit});
+    CHECK(info.exit_code == 1);
+    CHECK_THAT(info.output, Catch::Contains(scene.string() + ": is " + size + " bytes, over the limit of " + limit));
+    CHECK(run_canopy({"info", scene.string(), "--max-file-bytes", size}).exit_code == 0);
+
+    // trace: the ray file and the scene file.
+    trace_fixture const f;
+    std::string const ray_bytes = std::to_string(fs::file_size(f.mesh_rays_file));
+    auto const rays = run_canopy({"trace", "--scene", f.obj.string(), "--rays", f.mesh_rays_file.string(), "--query",
+                                  "any", "--out", (f.folder.path / "x.hits").string(), "--max-file-bytes",
+                                  std::to_string(fs::file_size(f.obj))});
+    CHECK(rays.exit_code == 1);
+    CHECK_THAT(rays.output, Catch::Contains(f.mesh_rays_file.string() + ": is " + ray_bytes +
+                                            " bytes, over the limit of " + std::to_string(fs::file_size(f.obj)) +
+                                            " bytes per file (--max-file-bytes) (ray file)"));
+    CHECK_FALSE(fs::exists(f.folder.path / "x.hits"));
+}
+
+TEST_CASE("canopy trace refuses inputs that are not regular files or hold nothing to trace") {
+    trace_fixture const f;
+    fs::path const out = f.folder.path / "x.hits";
+    fs::create_directories(f.folder.path / "folder.rays");
+    write_bytes(f.folder.path / "empty.rays", "");
+    write_bytes(f.folder.path / "points.obj", "v 0 0 0\nv 1 0 0\n# no faces\n");
+    write_bytes(f.folder.path / "none.inst", "mesh mesh.obj\n");
+    REQUIRE(::mkfifo((f.folder.path / "pipe.rays").c_str(), 0600) == 0);
+    struct bad_input {
+        std::string scene, rays, message;
+    };
+    std::vector<bad_input> const inputs{
+        {f.obj.string(), (f.folder.path / "folder.rays").string(), "folder.rays: is a folder, not a regular file (ray file)"},
+        {f.obj.string(), "/dev/zero", "/dev/zero: is a character device, not a regular file (ray file)"},
+        {f.obj.string(), (f.folder.path / "pipe.rays").string(), "pipe.rays: is a FIFO, not a regular file (ray file)"},
+        {f.obj.string(), (f.folder.path / "empty.rays").string(), "empty.rays: holds no rays (the file is empty): nothing to trace"},
+        {(f.folder.path / "points.obj").string(), f.mesh_rays_file.string(), "points.obj: holds no triangles: nothing to trace"},
+        {(f.folder.path / "none.inst").string(), f.mesh_rays_file.string(), "none.inst: holds no instances: nothing to trace"},
+        {(f.folder.path / "folder.rays" / "x.obj").string(), f.mesh_rays_file.string(), "x.obj: file not found (scene)"},
+    };
+    for (auto const& input : inputs) {
+        INFO(input.scene << " " << input.rays);
+        auto const result = run_canopy({"trace", "--scene", input.scene, "--rays", input.rays, "--query", "closest",
+                                        "--out", out.string()});
+        INFO(result.output);
+        CHECK(result.exit_code == 1);
+        CHECK_THAT(result.output, Catch::Contains(input.message));
+        CHECK_FALSE(fs::exists(out)); // checked writable, then left as it was: absent
+    }
+}
+
+TEST_CASE("canopy render checks its output folder and images before loading, and after writing") {
+    // The image through a link to /dev/full; an output folder that cannot be made, or whose image
+    // is taken by a folder, is found before anything is loaded.
+    temp_folder const folder("canopy_cli_output_test");
+    fs::create_directories(folder.path / "full");
+    fs::create_symlink("/dev/full", folder.path / "full" / "sphere.png");
+    auto const render_full = run_canopy({"render", "gen:sphere", "-o", (folder.path / "full").string(), "--size", "16x16"});
+    CHECK(render_full.exit_code == 1);
+    CHECK_THAT(render_full.output, Catch::Contains("full/sphere.png: cannot write: No space left on device"));
+    CHECK_THAT(render_full.output, !Catch::Contains("rendered 1 image"));
+
+    auto const file = folder.write("a_file", "x");
+    auto const under_file = run_canopy({"render", "gen:sphere", "-o", (file / "sub").string(), "--size", "16x16"});
+    CHECK(under_file.exit_code == 1);
+    CHECK_THAT(under_file.output, Catch::Contains((file / "sub").string() + ": cannot create the output folder: Not a directory"));
+    CHECK_THAT(under_file.output, !Catch::Contains("loaded in"));
+    auto const on_file = run_canopy({"render", "-o", file.string(), "--size", "16x16"});
+    CHECK(on_file.exit_code == 1);
+    CHECK_THAT(on_file.output, Catch::Contains(file.string() + ": the output folder exists and is not a folder"));
+    fs::create_directories(folder.path / "taken" / "3_procedural_alpha_mask.png");
+    auto const taken = run_canopy({"render", "-o", (folder.path / "taken").string(), "--size", "16x16"});
+    CHECK(taken.exit_code == 1);
+    CHECK_THAT(taken.output, Catch::Contains("3_procedural_alpha_mask.png: cannot be written: Is a directory"));
+    CHECK_THAT(taken.output, !Catch::Contains("demo scene:"));
+    CHECK_FALSE(fs::exists(folder.path / "taken" / "1_billboards_alpha_ignored.png"));
+}
+
+TEST_CASE("canopy trace checks its hit file before tracing and after closing it, and standard output at exit") {
+    trace_fixture const f;
+    auto const trace_to = [&](std::string const& out) {
+        return run_canopy({"trace", "--scene", f.obj.string(), "--rays", f.mesh_rays_file.string(), "--query", "any",
+                           "--out", out});
+    };
+    // A full device: the write fails at closing, with the system's reason.
+    auto const full = trace_to("/dev/full");
+    CHECK(full.exit_code == 1);
+    CHECK_THAT(full.output, Catch::Contains("/dev/full: cannot write: No space left on device"));
+    // Found before the scene is loaded (no "build" line): a folder, a missing folder, a FIFO
+    // without a reader.
+    fs::create_directories(f.folder.path / "taken.hits");
+    REQUIRE(::mkfifo((f.folder.path / "pipe.hits").c_str(), 0600) == 0);
+    for (auto const& [out, reason] : {std::pair<std::string, std::string>{(f.folder.path / "taken.hits").string(), "Is a directory"},
+                                      {(f.folder.path / "no/such/x.hits").string(), "No such file or directory"},
+                                      {(f.folder.path / "pipe.hits").string(), "a FIFO with no reader"}}) {
+        INFO(out);
+        auto const result = trace_to(out);
+        INFO(result.output);
+        CHECK(result.exit_code == 1);
+        CHECK_THAT(result.output, Catch::Contains(out + ": cannot be written: " + reason));
+        CHECK_THAT(result.output, !Catch::Contains("build"));
+    }
+
+    // Standard output: lost output is an error.
+    auto const lost = test_support::run_command("(" + canopy_command({"info", "--plugins"}) + " >/dev/full)");
+    CHECK(lost.exit_code == 1);
+    CHECK_THAT(lost.output, Catch::Contains("canopy: cannot write to standard output: No space left on device"));
+}
+
+TEST_CASE("canopy names the step and the file when memory runs out") {
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || __has_feature(memory_sanitizer)
+    WARN("not run: an address-space limit cannot apply under a sanitizer's shadow memory");
+    return;
+#endif
+#endif
+    temp_folder const folder("canopy_cli_memory_test");
+    // A 16384 × 16384 float RGBA framebuffer (4 GiB) under a 1 GB address-space limit; one
+    // thread, so that no worker thread needs a stack.
+    auto const result = test_support::run_command(
+        "ulimit -v 1000000 && " + canopy_command({"render", "gen:sphere", "-o", folder.path.string(), "--size",
+                                                  "16384x16384", "--max-texels", "268435456", "--threads", "1"}));
+    INFO(result.output);
+    CHECK(result.exit_code == 1);
+    CHECK_THAT(result.output, Catch::Contains("canopy: out of memory while rendering " +
+                                              (folder.path / "sphere.png").string()));
+    CHECK_FALSE(fs::exists(folder.path / "sphere.png"));
+}
+
+TEST_CASE("canopy render refuses a degenerate camera, naming the file and the camera") {
+    temp_folder const folder("canopy_cli_camera_test");
+    std::vector<json_quad> const floor{floor_quad("floor", 1.0f, 0.0f)};
+    struct bad_camera {
+        std::string name, nodes, message;
+    };
+    std::vector<bad_camera> const cameras{
+        {"zero_up", R"({"type": "camera", "name": "main", "eye": [0, 2, 5], "up": [0, 0, 0]})",
+         "zero_up.json: camera 'main': up is zero: no orientation"},
+        // The camera under a scale of 1e-30: eye and target 5e-30 apart, no direction in float.
+        {"collapsed", R"({"type": "transform", "scale": 1e-30, "children": [{"type": "camera", "name": "tiny", "eye": [0, 0, 5]}]})",
+         "collapsed.json: camera 'tiny': eye (0, 0, 5e-30) and target (0, 0, 0) are too close to give a view direction in float"},
+        // Placed beyond float range: the eye is infinite.
+        {"far", R"({"type": "transform", "scale": 1e38, "children": [{"type": "camera", "name": "far", "eye": [0, 0, 50]}]})",
+         "far.json: camera 'far': eye (0, 0, inf) is not finite"},
+        // Without a camera, bounds beyond float range or with no extent in float.
+        {"huge", "", "huge.json: automatic camera: the scene's bounds (-3e+38, 0, -3e+38) .. (3e+38, 0, 3e+38) are empty or beyond float range: give the scene a camera"},
+        {"speck", "", "speck.json: automatic camera: the scene's bounds"},
+    };
+    for (auto const& c : cameras) {
+        INFO(c.name);
+        std::vector<json_quad> quads = floor;
+        if (c.name == "huge") quads = {floor_quad("floor", 3e38f, 0.0f)};
+        if (c.name == "speck") quads = {floor_quad("floor", 1e-30f, 0.0f)};
+        auto const file = folder.write(c.name + ".json", scene_with(quads, "", c.nodes));
+        auto const result = run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "16x16"});
+        INFO(result.output);
+        CHECK(result.exit_code == 1);
+        CHECK_THAT(result.output, Catch::Contains(file.parent_path().string() + "/" + c.message));
+        CHECK_FALSE(fs::exists(folder.path / (c.name + ".png")));
+    }
+}
+
+TEST_CASE("canopy render: an up vector along the view direction falls back to -z (looking down) or +y") {
+    temp_folder const folder("canopy_cli_camera_test");
+    // The floor in three parts: red at x < 0, z < 0; green at x > 0, z < 0; blue at z > 0.
+    std::vector<json_quad> const parts{{"red", "red", {-2, 0, -2, -2, 0, 0, 0, 0, 0, 0, 0, -2}},
+                                       {"green", "green", {0, 0, -2, 0, 0, 0, 2, 0, 0, 2, 0, -2}},
+                                       {"blue", "blue", {-2, 0, 0, -2, 0, 2, 2, 0, 2, 2, 0, 0}}};
+    std::string const materials = R"({"name": "red", "colour": [1, 0, 0]}, {"name": "green", "colour": [0, 1, 0]},
+                                     {"name": "blue", "colour": [0, 0, 1]})";
+    // Straight down with the default up (0, 1, 0): the fallback up is -z, so the image's top
+    // shows z < 0 and its right x > 0.
+    auto const down = folder.write("down.json", scene_with(parts, materials,
+                                                           R"({"type": "camera", "eye": [0, 5, 0], "target": [0, 0, 0], "fovy": 30})"));
+    auto const result = run_canopy({"render", down.string(), "-o", folder.path.string(), "--size", "40x40"});
+    INFO(result.output);
+    REQUIRE(result.exit_code == 0);
+    auto const image = canopy::read_image(folder.path / "down.png");
+    auto const dominant = [&](int x, int y) {
+        float const* p = image.at(x, y);
+        return p[0] > 2.0f * std::max(p[1], p[2]) ? 0 : p[1] > 2.0f * std::max(p[0], p[2]) ? 1
+                                                    : p[2] > 2.0f * std::max(p[0], p[1]) ? 2 : -1;
+    };
+    CHECK(dominant(10, 10) == 0); // top left: red
+    CHECK(dominant(30, 10) == 1); // top right: green
+    CHECK(dominant(10, 30) == 2); // bottom: blue
+    CHECK(dominant(30, 30) == 2);
+
+    // Looking along -z with up (0, 0, 5): the fallback is +y, the same image as with up (0, 1, 0).
+    auto const along = [&](std::string const& name, std::string const& up) {
+        auto const file = folder.write(name + ".json", scene_with(parts, materials,
+                                                                  R"({"type": "camera", "eye": [0, 3, 6], "target": [0, 3, 0], "up": )" +
+                                                                      up + "}"));
+        auto const r = run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "24x24"});
+        INFO(r.output);
+        REQUIRE(r.exit_code == 0);
+        return read_bytes(folder.path / (name + ".png"));
+    };
+    CHECK(along("parallel", "[0, 0, 5]") == along("plain", "[0, 1, 0]"));
+}
+
+TEST_CASE("canopy render --kernel ao: the default radius scales with the scene, --ao-radius sets it") {
+    temp_folder const folder("canopy_cli_ao_test");
+    // A floor of 2 × 2 with 19 fins 0.1 high, 0.1 apart, seen from above at an angle (every pixel
+    // on the model), scaled by s.
+    auto const scene = [&](float s) {
+        auto const q = [&](std::string name, std::array<float, 12> c) {
+            for (float& v : c) v *= s;
+            return json_quad{std::move(name), "", c};
+        };
+        std::vector<json_quad> quads{q("floor", {-1, 0, -1, -1, 0, 1, 1, 0, 1, 1, 0, -1})};
+        for (int i = -9; i <= 9; ++i) {
+            float const x = 0.1f * float(i);
+            quads.push_back(q("fin" + std::to_string(i + 9), {x, 0, -1, x, 0.1f, -1, x, 0.1f, 1, x, 0, 1}));
+        }
+        return scene_with(quads, "",
+                          "{\"type\": \"camera\", \"eye\": [0, " + number(1.6f * s) + ", " + number(1.2f * s) +
+                              "], \"target\": [0, 0, " + number(-0.1f * s) + "], \"fovy\": 40}");
+    };
+    auto const render = [&](std::string const& name, float s, std::vector<std::string> extra) {
+        auto const file = folder.write(name + ".json", scene(s));
+        std::vector<std::string> args{"render", file.string(), "-o", folder.path.string(), "--size", "48x36", "--kernel",
+                                      "ao", "--spp", "8"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        auto const result = run_canopy(args);
+        INFO(result.output);
+        REQUIRE(result.exit_code == 0);
+        return mean_linear(canopy::read_image(folder.path / (name + ".png")));
+    };
+    double const unit = render("unit", 1.0f, {});
+    double const large = render("large", 1000.0f, {});
+    double const relative = render("relative", 1000.0f, {"--ao-radius", "5%"});
+    double const absolute = render("absolute", 1000.0f, {"--ao-radius", "2"});
+    INFO("mean AO: unit " << unit << ", large " << large << ", 5% " << relative << ", absolute 2: " << absolute);
+    // The same picture at any scale: the radius is 5% of the bounding-box diagonal (0.14 at unit
+    // scale, longer than the gaps between the fins: well occluded).
+    CHECK(std::fabs(unit - large) < 0.01);
+    CHECK(unit < 0.8);
+    CHECK(relative == Approx(large).margin(1e-9));
+    // An absolute radius does not scale: 2 units in a model 2800 across sees no occluder.
+    CHECK(absolute > 0.95);
+}
+
+TEST_CASE("canopy render --kernel ao between two planes matches the analytic open fraction (h/R)²") {
+    // Floor y = 0 and ceiling y = h = 1, far wider than R. From a point of either plane a
+    // cosine-weighted ray at angle θ to the normal meets the other plane at distance h / cos θ;
+    // under cosine weighting cos²θ is uniform in [0, 1], so a fraction (h/R)² of the rays of
+    // length R escapes (all of them when R ≤ h). Every pixel sees a plane.
+    temp_folder const folder("canopy_cli_ao_test");
+    auto const file = folder.write(
+        "planes.json",
+        scene_with({floor_quad("floor", 1000.0f, 0.0f), floor_quad("ceiling", 1000.0f, 1.0f)}, "",
+                   R"({"type": "camera", "eye": [0, 0.5, 0], "target": [0, -0.5, -1], "fovy": 30})"));
+    for (double const radius : {0.5, 2.0, 4.0}) {
+        INFO("R = " << radius);
+        auto const result = run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "32x32",
+                                        "--kernel", "ao", "--ao-radius", number(float(radius))});
+        INFO(result.output);
+        REQUIRE(result.exit_code == 0);
+        double const expected = std::min(1.0, 1.0 / (radius * radius));
+        CHECK(mean_linear(canopy::read_image(folder.path / "planes.png")) == Approx(expected).margin(0.015));
+    }
+}
+
+TEST_CASE("canopy render --exposure and --tonemap follow their formulas, and path defaults to aces") {
+    temp_folder const folder("canopy_cli_tone_test");
+    // A white floor seen from above at an angle: lit by the sun, radiance above 1.
+    auto const file = folder.write("white.json",
+                                   scene_with({floor_quad("floor", 50.0f, 0.0f, "white")},
+                                              R"({"name": "white", "colour": [1, 1, 1]})",
+                                              R"({"type": "camera", "eye": [0, 3, 3], "target": [0, 0, -1], "fovy": 40})"));
+    auto const render = [&](std::string const& name, std::vector<std::string> extra) {
+        fs::path const out = folder.path / name;
+        std::vector<std::string> args{"render", file.string(), "-o", out.string(), "--size", "24x18"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        auto const result = run_canopy(args);
+        INFO(result.output);
+        REQUIRE(result.exit_code == 0);
+        return canopy::read_image(out / "white.png");
+    };
+    auto const linear = [](canopy::rgba_image const& image, std::size_t i) { return srgb_to_linear(double(image.pixels[i])); };
+    // The written formulas: radiance v from an image at -3 EV (8 × its linear value, unclipped).
+    auto const reinhard = [](double v) { return v / (1.0 + v); };
+    auto const aces = [](double v) { return std::min(1.0, v * (2.51 * v + 0.03) / (v * (2.43 * v + 0.59) + 0.14)); };
+
+    auto const none_m3 = render("none_m3", {"--exposure", "-3"});
+    auto const none_0 = render("none_0", {});
+    auto const reinhard_0 = render("reinhard", {"--tonemap", "reinhard"});
+    int channels = 0, over_one = 0, exposure_errors = 0, reinhard_errors = 0;
+    for (std::size_t i = 0; i < none_0.pixels.size(); ++i) {
+        if (i % 4 == 3) continue;
+        double const v = 8.0 * linear(none_m3, i);
+        ++channels;
+        over_one += v > 1.05;
+        exposure_errors += std::fabs(linear(none_0, i) - std::min(1.0, v)) > 0.02;
+        reinhard_errors += std::fabs(linear(reinhard_0, i) - reinhard(v)) > 0.02;
+    }
+    CHECK(over_one > channels / 4); // radiance over 1: the plain image clips there
+    CHECK(exposure_errors == 0);
+    CHECK(reinhard_errors == 0);
+
+    // The path kernel (deterministic samples): its default curve is aces, which does not clip
+    // what --tonemap none clips.
+    auto const path_m3 = render("path_m3", {"--kernel", "path", "--spp", "4", "--tonemap", "none", "--exposure", "-3"});
+    auto const path_default = render("path_default", {"--kernel", "path", "--spp", "4"});
+    int path_over_one = 0, aces_errors = 0, aces_clipped = 0;
+    for (std::size_t i = 0; i < path_m3.pixels.size(); ++i) {
+        if (i % 4 == 3) continue;
+        double const v = 8.0 * linear(path_m3, i);
+        path_over_one += v > 1.05;
+        aces_errors += std::fabs(linear(path_default, i) - aces(v)) > 0.02;
+        aces_clipped += path_default.pixels[i] == 1.0f;
+    }
+    CHECK(path_over_one > 0);
+    CHECK(aces_errors == 0);
+    CHECK(aces_clipped == 0);
+}
+
+TEST_CASE("canopy render: bounds beyond float range give no AO radius and no default point light") {
+    temp_folder const folder("canopy_cli_bounds_test");
+    auto const file = folder.write("huge.json", scene_with({floor_quad("floor", 3e38f, 0.0f)}, "",
+                                                           R"({"type": "camera", "eye": [0, 5, 5]})"));
+    auto const ao = run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "8x8", "--kernel", "ao"});
+    CHECK(ao.exit_code == 1);
+    CHECK_THAT(ao.output, Catch::Contains(file.string() + ": the AO radius, 5% of the bounding-box diagonal (inf), is "
+                                                          "not a positive finite length: give --ao-radius in scene units"));
+    auto const path = run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "8x8", "--kernel", "path"});
+    CHECK(path.exit_code == 1);
+    CHECK_THAT(path.output, Catch::Contains(file.string() + ": the bounding box (diagonal inf) is beyond float range for "
+                                                            "the default point light of the path kernel: give the scene a point light"));
+    CHECK_FALSE(fs::exists(folder.path / "huge.png"));
+    // With a radius given, the AO image is made.
+    CHECK(run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "8x8", "--kernel", "ao",
+                      "--ao-radius", "1"}).exit_code == 0);
 }

@@ -1,10 +1,14 @@
 // canopy — the command-line program.
 //
 //   canopy render [SCENE] [-o OUT] [--size WxH] [--spp N] [--kernel primary|ao|path|heatmap]
-//                 [--intersector none|alpha|procedural|costs] [--threads N]
+//                 [--intersector auto|none|alpha|procedural|bench|costs] [--ao-radius R[%]]
+//                 [--exposure EV] [--tonemap none|reinhard|aces] [--threads N] [--plugin FILE]...
+//                 [LIMITS]
 //   canopy trace --scene FILE --rays FILE --query closest|any --out FILE
-//                [--intersector none|alpha] [--threads N]
-//   canopy info SCENE | --plugins
+//                [--intersector none|alpha] [--threads N] [LIMITS]
+//   canopy info SCENE | --plugins [--plugin FILE]... [LIMITS]
+//   LIMITS: [--max-file-bytes N] [--max-texels N] [--max-triangles N] [--max-placements N]
+//           [--max-depth N]  (canopy::resource_limits, set before anything is loaded)
 //
 // `canopy render` without a scene renders the built-in demo (instanced alpha-masked billboards)
 // into the four images of Figure 1 of the custom-intersector paper. With a scene, any file a
@@ -13,21 +17,36 @@
 // (canopy.scene's skip rules) and rendered with the scene's camera and lights when it has them.
 // `canopy trace` reads the benchmark formats (.obj subset: one BVH, no top level; .inst: one shared
 // mesh instanced under a top-level BVH); rays and hits use the benchmark formats too.
+//
+// Exit status: 0 success; 1 an error in an input, an output or a limit (the message names the
+// file and the problem); 2 a usage error (unknown, missing, repeated or malformed option, followed
+// by the command's usage). Numbers are read whole and range-checked. Output files are checked
+// before any work (the folder is created, each file opened for writing) and again after closing;
+// standard output is checked at exit.
 #include <algorithm>
 #include <atomic>
+#include <charconv>
 #include <chrono>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <exception>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <memory>
+#include <new>
 #include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <vector>
+#include <cerrno>
+#include <fcntl.h>
 #include <unistd.h>
 #include <fmt/core.h>
 #include <tbb/blocked_range.h>
@@ -51,71 +70,229 @@ struct usage_error : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
+// What the program is doing, for the message when memory runs out ("loading scene.obj").
+std::string current_step = "starting";
+
+void step(std::string what) { current_step = std::move(what); }
+
 constexpr char const* main_usage =
     "usage: canopy <command> [options]\n"
     "commands:\n"
     "  render  render the demo scene (no SCENE) or a scene file into PNG images\n"
     "  trace   trace a ray file against a scene, write a hit file\n"
     "  info    print scene statistics, compile decisions and BVH statistics\n"
-    "run 'canopy <command> --help' for the options of a command\n";
+    "run 'canopy <command> --help' for the options of a command\n"
+    "exit status: 0 success, 1 error (the message names the file), 2 usage error\n";
 
-constexpr char const* trace_usage =
+// The resource-limit options of every command; defaults from canopy::resource_limits.
+constexpr char const* limits_usage =
+    "limits (checked before anything is allocated; a file over a limit is refused, naming it):\n"
+    "  --max-file-bytes N  bytes of one input file (default 4294967296 = 4 GiB)\n"
+    "  --max-texels N      texels of one image, and pixels of a rendered image (default 67108864\n"
+    "                      = 2^26, 1 GiB as float RGBA)\n"
+    "  --max-triangles N   triangles (and vertices) of the scene's meshes together, each mesh\n"
+    "                      counted once (default 268435456 = 2^28)\n"
+    "  --max-placements N  mesh placements after instances are flattened (default 16777216 = 2^24)\n"
+    "  --max-depth N       nesting depth of the scene graph and of a file's structures (default 4096)\n";
+
+constexpr char const* trace_options_usage =
     "usage: canopy trace --scene FILE --rays FILE --query closest|any --out FILE\n"
-    "                    [--intersector none|alpha] [--threads N]\n"
+    "                    [--intersector none|alpha] [--threads N] [limits]\n"
     "  --scene FILE        .obj (single mesh) or .inst (instanced mesh)\n"
-    "  --rays FILE         32-byte rays: origin, tmin, direction, tmax (float32)\n"
+    "  --rays FILE         32-byte rays: origin, tmin, direction, tmax (float32); at least one\n"
     "  --query KIND        closest: nearest accepted hit; any: first accepted hit\n"
-    "  --out FILE          20-byte hits: t, prim, inst, u, v\n"
+    "  --out FILE          20-byte hits: t, prim, inst, u, v (checked writable before tracing)\n"
     "  --intersector KIND  none (default) or alpha: reject hits where floor(8u)+floor(8v) is odd\n"
-    "  --threads N         worker threads (default: all cores)\n";
+    "  --threads N         worker threads, 1 to 1024 (default: all cores)\n";
 
-constexpr char const* render_usage =
+constexpr char const* render_options_usage =
     "usage: canopy render [SCENE] [-o OUT] [--size WxH] [--spp N] [--kernel KIND]\n"
-    "                     [--intersector KIND] [--threads N] [--plugin FILE]\n"
+    "                     [--intersector KIND] [--ao-radius R[%]] [--exposure EV]\n"
+    "                     [--tonemap CURVE] [--threads N] [--plugin FILE]... [limits]\n"
     "  SCENE               a file any registered plugin loads (canopy info --plugins lists them),\n"
     "                      or gen:NAME[:KEY=VALUE,...] for a registered generator; without it, the\n"
     "                      built-in demo scene is rendered into the four images of the paper's\n"
     "                      Figure 1 (alpha ignored, texture alpha mask, procedural alpha mask, BVH\n"
-    "                      cost heat map)\n"
-    "  -o OUT              output folder (default: out)\n"
-    "  --size WxH          image size (default 800x600)\n"
-    "  --spp N             samples per pixel (default 1; 16 for ao and path)\n"
+    "                      cost heat map; --kernel applies to the first three)\n"
+    "  -o OUT              output folder (default: out), created if missing; OUT/SCENE-STEM.png\n"
+    "  --size WxH          image size, W and H from 1 to 16384, W*H at most --max-texels\n"
+    "                      (default 800x600)\n"
+    "  --spp N             samples per pixel, 1 to 65536 (default 1; 16 for ao and path)\n"
     "  --kernel KIND       primary (default), ao, path or heatmap\n"
     "  --intersector KIND  auto (default: alpha when the scene has masked materials, else none),\n"
     "                      none, alpha (texture alpha mask), procedural (ring mask on masked\n"
-    "                      materials), bench (the alpha rule of the bench formats) or costs (heat map)\n"
-    "  --threads N         worker threads (default: all cores)\n"
+    "                      materials), bench (the alpha rule of the bench formats) or costs (the\n"
+    "                      heat map); a SCENE only (the demo's figures have their own)\n"
+    "  --ao-radius R[%]    ao: length of the occlusion rays, in scene units, or with % in percent\n"
+    "                      of the scene's bounding-box diagonal (default 5%)\n"
+    "  --exposure EV       scale radiance by 2^EV before the tone curve, -30 to 30 (default 0)\n"
+    "  --tonemap CURVE     none (clip at 1), reinhard (x/(1+x)) or aces (filmic); default aces\n"
+    "                      for the path kernel, none for primary and ao; not for the heat map\n"
+    "  --threads N         worker threads, 1 to 1024 (default: all cores)\n"
     "  --plugin FILE       load a shared-library plugin first (may be repeated)\n";
 
-constexpr char const* info_usage =
-    "usage: canopy info SCENE [--plugin FILE]...\n"
+constexpr char const* info_options_usage =
+    "usage: canopy info SCENE [--plugin FILE]... [limits]\n"
     "       canopy info --plugins [--plugin FILE]...\n"
     "  SCENE      a file any registered plugin loads, or gen:NAME[:KEY=VALUE,...]\n"
     "  --plugins  list the registered loaders, image loaders, generators and node types\n"
     "  --plugin FILE  load a shared-library plugin first (may be repeated)\n";
 
-// --name value pairs after the command; "--help" alone.
-std::map<std::string, std::string> parse_options(std::span<char*> args, std::vector<std::string> const& known,
-                                                 char const* usage) {
-    std::map<std::string, std::string> options;
-    for (std::size_t i = 0; i < args.size(); ++i) {
-        std::string const name = args[i];
-        if (name == "--help" || name == "-h") {
-            std::fputs(usage, stdout);
-            std::exit(0);
-        }
-        if (std::find(known.begin(), known.end(), name) == known.end())
-            throw usage_error("unknown option '" + name + "'");
-        if (i + 1 >= args.size()) throw usage_error("option '" + name + "' needs a value");
-        options[name] = args[++i];
-    }
-    return options;
+std::string const trace_usage = std::string(trace_options_usage) + limits_usage;
+std::string const render_usage = std::string(render_options_usage) + limits_usage;
+std::string const info_usage = std::string(info_options_usage) + limits_usage;
+
+// ---- arguments ---------------------------------------------------------------------------
+
+// At most 40 characters of an argument in quotes, bytes that are not printable as '?'.
+std::string quote(std::string_view text) {
+    std::string out = "'";
+    for (char c : text.substr(0, 40)) out += c >= 0x20 && c < 0x7f ? c : '?';
+    return out + (text.size() > 40 ? "...'" : "'");
 }
 
-std::string required(std::map<std::string, std::string> const& options, std::string const& name) {
-    auto const it = options.find(name);
-    if (it == options.end()) throw usage_error("missing " + name);
-    return it->second;
+struct option_spec {
+    std::string_view name;
+    bool takes_value = true;
+    bool repeatable = false;
+};
+
+// Every command's limit options.
+constexpr option_spec limit_options[] = {
+    {"--max-file-bytes"}, {"--max-texels"}, {"--max-triangles"}, {"--max-placements"}, {"--max-depth"}};
+
+struct arguments {
+    std::map<std::string, std::vector<std::string>, std::less<>> options;
+    std::vector<std::string> positional;
+    bool help = false;
+
+    bool has(std::string_view name) const { return options.find(name) != options.end(); }
+    std::string const& value(std::string_view name) const { return options.find(name)->second.front(); }
+    std::string value_or(std::string_view name, std::string fallback) const {
+        return has(name) ? value(name) : std::move(fallback);
+    }
+    std::vector<std::string> values(std::string_view name) const {
+        return has(name) ? options.find(name)->second : std::vector<std::string>{};
+    }
+};
+
+// Options (given once, unless repeatable; a value is the next argument, non-empty, not an option)
+// and positional arguments ("--" ends the options). "--help" or "-h" anywhere stops parsing.
+arguments parse_arguments(std::span<char*> args, std::vector<option_spec> specs) {
+    specs.insert(specs.end(), std::begin(limit_options), std::end(limit_options));
+    arguments out;
+    bool options_ended = false;
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        std::string const a = args[i];
+        if (options_ended || a.size() < 2 || a[0] != '-') {
+            if (a.empty()) throw usage_error("an empty argument (a file name was expected)");
+            out.positional.push_back(a);
+            continue;
+        }
+        if (a == "--") {
+            options_ended = true;
+            continue;
+        }
+        if (a == "--help" || a == "-h") {
+            out.help = true;
+            return out;
+        }
+        auto const spec = std::find_if(specs.begin(), specs.end(), [&](option_spec const& o) { return o.name == a; });
+        if (spec == specs.end()) throw usage_error("unknown option " + quote(a));
+        if (!spec->repeatable && out.has(a)) throw usage_error("option " + a + " given more than once");
+        if (!spec->takes_value) {
+            out.options[a].emplace_back();
+            continue;
+        }
+        if (i + 1 >= args.size()) throw usage_error("option " + a + " needs a value");
+        std::string const value = args[++i];
+        if (value.empty()) throw usage_error("option " + a + " has an empty value");
+        if (value.starts_with("--")) throw usage_error("option " + a + " needs a value, not the option " + quote(value));
+        out.options[a].push_back(value);
+    }
+    return out;
+}
+
+std::string required(arguments const& args, std::string_view name) {
+    if (!args.has(name)) throw usage_error("missing " + std::string(name));
+    return args.value(name);
+}
+
+// The whole text as a number in [lo, hi], or nothing.
+std::optional<std::uint64_t> whole_number(std::string_view text, std::uint64_t lo, std::uint64_t hi) {
+    std::uint64_t v = 0;
+    auto const [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+    if (ec != std::errc() || end != text.data() + text.size() || v < lo || v > hi) return std::nullopt;
+    return v;
+}
+
+std::uint64_t whole_option(arguments const& args, std::string_view name, std::uint64_t lo, std::uint64_t hi) {
+    std::string const& text = args.value(name);
+    auto const v = whole_number(text, lo, hi);
+    if (!v)
+        throw usage_error(std::string(name) + " must be a whole number from " + std::to_string(lo) + " to " +
+                          std::to_string(hi) + ", not " + quote(text));
+    return *v;
+}
+
+// A finite decimal number in [lo, hi], the whole text.
+double real_option(std::string_view name, std::string_view text, double lo, double hi, std::string const& range) {
+    double v = 0.0;
+    auto const [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+    if (ec != std::errc() || end != text.data() + text.size() || !std::isfinite(v) || v < lo || v > hi)
+        throw usage_error(std::string(name) + " must be a number " + range + ", not " + quote(text));
+    return v;
+}
+
+// Sets canopy::default_limits() from the limit options, before anything is loaded.
+void apply_limits(arguments const& args) {
+    canopy::resource_limits& limits = canopy::default_limits();
+    std::uint64_t const most = std::numeric_limits<std::uint64_t>::max();
+    if (args.has("--max-file-bytes")) limits.max_file_bytes = whole_option(args, "--max-file-bytes", 1, most);
+    if (args.has("--max-texels")) limits.max_texels = whole_option(args, "--max-texels", 1, most);
+    if (args.has("--max-triangles")) limits.max_triangles = whole_option(args, "--max-triangles", 1, most);
+    if (args.has("--max-placements")) limits.max_placements = whole_option(args, "--max-placements", 1, most);
+    if (args.has("--max-depth")) limits.max_depth = whole_option(args, "--max-depth", 1, most);
+}
+
+// --threads N: the worker limit, kept in `control` (constructed in place: a global_control must
+// not be copied) for as long as the caller keeps it.
+void limit_threads(arguments const& args, std::optional<tbb::global_control>& control) {
+    if (args.has("--threads"))
+        control.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(whole_option(args, "--threads", 1, 1024)));
+}
+
+// ---- output files ----------------------------------------------------------------------------
+
+struct output_error : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+std::string os_reason(int error) { return error != 0 ? std::strerror(error) : "unknown error"; }
+
+// Checks, before any work, that `file` can be written: it is opened for writing (not truncated;
+// non-blocking, so a FIFO without a reader is an error, not a hang). A file that was not there is
+// removed again.
+void check_writable(std::filesystem::path const& file) {
+    int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NONBLOCK | O_CLOEXEC, 0666);
+    bool const created = fd >= 0;
+    if (fd < 0 && errno == EEXIST) fd = ::open(file.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0 && errno == ENXIO) throw output_error(file.string() + ": cannot be written: a FIFO with no reader");
+    if (fd < 0) throw output_error(file.string() + ": cannot be written: " + os_reason(errno));
+    ::close(fd);
+    if (created) ::unlink(file.c_str());
+}
+
+// Creates the output folder (and its parents) when missing; refuses a path that is not a folder.
+void prepare_folder(std::filesystem::path const& folder) {
+    if (folder.empty()) return;
+    std::error_code ec;
+    if (std::filesystem::exists(folder, ec) && !std::filesystem::is_directory(folder, ec))
+        throw output_error(folder.string() + ": the output folder exists and is not a folder");
+    std::filesystem::create_directories(folder, ec);
+    if (ec) throw output_error(folder.string() + ": cannot create the output folder: " + ec.message());
+    if (!std::filesystem::is_directory(folder, ec))
+        throw output_error(folder.string() + ": the output folder exists and is not a folder");
 }
 
 // Either a single-level scene or a two-level instanced one.
@@ -130,13 +307,23 @@ struct loaded_scene {
 std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path) {
     auto scene = std::make_unique<loaded_scene>();
     auto const ext = path.extension().string();
+    if (ext != ".obj" && ext != ".inst")
+        throw canopy::scene_error(path.string(), "", "unknown scene extension " + quote(ext) + " (expected .obj or .inst)");
+    step("loading " + path.string());
+    canopy::require_regular_file(path, "scene");
     if (ext == ".obj") {
         auto const mesh = canopy::read_bench_obj(path);
+        if (mesh.triangles.empty()) throw canopy::scene_error(path.string(), "", "holds no triangles: nothing to trace");
+        step("building the BVH of " + path.string());
         auto const start = clock_type::now();
         scene->mesh = canopy::build_binned_sah(mesh.triangles);
         scene->build_seconds = seconds_since(start);
     } else if (ext == ".inst") {
         auto const inst = canopy::read_bench_inst(path);
+        if (inst.instances.empty()) throw canopy::scene_error(path.string(), "", "holds no instances: nothing to trace");
+        if (inst.mesh.triangles.empty())
+            throw canopy::scene_error(inst.mesh_path.string(), "", "holds no triangles: nothing to trace");
+        step("building the BVHs of " + path.string());
         auto const start = clock_type::now();
         scene->mesh = canopy::build_binned_sah(inst.mesh.triangles);
         for (std::size_t k = 0; k < inst.instances.size(); ++k)
@@ -144,8 +331,6 @@ std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path
         scene->top = canopy::build_binned_sah(scene->instances);
         scene->build_seconds = seconds_since(start);
         scene->instanced = true;
-    } else {
-        throw canopy::format_error(path.string() + ": unknown scene extension '" + ext + "' (expected .obj or .inst)");
     }
     return scene;
 }
@@ -164,26 +349,33 @@ canopy::bench_hit trace_one(loaded_scene const& scene, canopy::ray const& r, boo
     return {hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v};
 }
 
-int run_trace(std::span<char*> args) {
-    auto const options = parse_options(
-        args, {"--scene", "--rays", "--query", "--out", "--intersector", "--threads"}, trace_usage);
-    std::string const query = required(options, "--query");
-    if (query != "closest" && query != "any") throw usage_error("--query must be closest or any, not '" + query + "'");
-    std::string const isect_name = options.contains("--intersector") ? options.at("--intersector") : "none";
-    if (isect_name != "none" && isect_name != "alpha")
-        throw usage_error("--intersector must be none or alpha, not '" + isect_name + "'");
-    std::optional<tbb::global_control> threads;
-    if (options.contains("--threads")) {
-        int const n = std::atoi(options.at("--threads").c_str());
-        if (n < 1) throw usage_error("--threads needs a positive number");
-        threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(n));
+int run_trace(std::span<char*> all_args) {
+    arguments const args = parse_arguments(
+        all_args, {{"--scene"}, {"--rays"}, {"--query"}, {"--out"}, {"--intersector"}, {"--threads"}});
+    if (args.help) {
+        std::fputs(trace_usage.c_str(), stdout);
+        return 0;
     }
+    if (!args.positional.empty()) throw usage_error("unexpected argument " + quote(args.positional.front()));
+    apply_limits(args);
+    std::optional<tbb::global_control> threads;
+    limit_threads(args, threads);
+    std::string const scene_path = required(args, "--scene");
+    std::string const rays_path = required(args, "--rays");
+    std::string const out_path = required(args, "--out");
+    std::string const query = required(args, "--query");
+    if (query != "closest" && query != "any") throw usage_error("--query must be closest or any, not " + quote(query));
+    std::string const isect_name = args.value_or("--intersector", "none");
+    if (isect_name != "none" && isect_name != "alpha")
+        throw usage_error("--intersector must be none or alpha, not " + quote(isect_name));
 
-    std::string const scene_path = required(options, "--scene");
-    std::string const rays_path = required(options, "--rays");
-    std::string const out_path = required(options, "--out");
+    check_writable(out_path);
     auto const scene = load_bench_scene(scene_path);
+    step("reading " + rays_path);
+    canopy::require_regular_file(rays_path, "ray file");
     auto const rays = canopy::read_bench_rays(rays_path);
+    if (rays.empty()) throw canopy::scene_error(rays_path, "", "holds no rays (the file is empty): nothing to trace");
+    step("tracing " + rays_path);
     std::vector<canopy::bench_hit> hits(rays.size());
     bool const closest = query == "closest";
 
@@ -196,6 +388,7 @@ int run_trace(std::span<char*> args) {
                                             : trace_one(*scene, rays[i], closest, none);
     });
     double const trace_seconds = seconds_since(start);
+    step("writing " + out_path);
     canopy::write_bench_hits(out_path, hits);
 
     std::size_t const hit_count = std::size_t(std::count_if(hits.begin(), hits.end(), [](auto const& h) {
@@ -209,7 +402,7 @@ int run_trace(std::span<char*> args) {
 
 // ---- render ----------------------------------------------------------------------------------
 
-canopy::light_options lights_of(canopy::compiled_scene const& scene);
+canopy::light_options lights_of(canopy::compiled_scene const& scene, std::string const& spec);
 
 // The scene as the kernels see it, counting the rays traced.
 struct counting_scene {
@@ -238,6 +431,11 @@ struct render_job {
     int width = 800, height = 600, spp = 1;
     std::filesystem::path output;
     canopy::pinhole_camera camera;
+    std::string scene_name;             // how messages name the scene (its file, or gen:...)
+    float ao_radius = 0.0f;             // absolute (scene units), or
+    float ao_radius_fraction = 0.05f;   // of the bounding-box diagonal when ao_radius is 0
+    canopy::tone_curve tone = canopy::tone_curve::none;
+    float exposure_scale = 1.0f;        // 2^EV
 };
 
 struct render_result {
@@ -261,19 +459,41 @@ private:
     bool enabled_;
 };
 
-canopy::rgba_image to_display(canopy::framebuffer const& fb, bool linear) {
+// Linear radiance → display values: exposure, tone curve, sRGB encoding (`linear`), or the
+// colours as they are (heat map). NaN pixels are written black and counted in `nan_pixels`.
+canopy::rgba_image to_display(canopy::framebuffer const& fb, bool linear, render_job const& job,
+                              std::size_t& nan_pixels) {
     canopy::rgba_image img;
     img.width = fb.width;
     img.height = fb.height;
     img.pixels.resize(4 * fb.pixels.size());
+    nan_pixels = 0;
+    auto const display = [&](float v) {
+        return linear ? canopy::to_srgb(canopy::tone_map(v, job.tone, job.exposure_scale)) : v;
+    };
     for (std::size_t i = 0; i < fb.pixels.size(); ++i) {
         auto const& p = fb.pixels[i];
-        img.pixels[4 * i + 0] = linear ? canopy::to_srgb(p.x) : p.x;
-        img.pixels[4 * i + 1] = linear ? canopy::to_srgb(p.y) : p.y;
-        img.pixels[4 * i + 2] = linear ? canopy::to_srgb(p.z) : p.z;
+        bool const nan = std::isnan(p.x) || std::isnan(p.y) || std::isnan(p.z);
+        nan_pixels += nan;
+        img.pixels[4 * i + 0] = nan ? 0.0f : display(p.x);
+        img.pixels[4 * i + 1] = nan ? 0.0f : display(p.y);
+        img.pixels[4 * i + 2] = nan ? 0.0f : display(p.z);
         img.pixels[4 * i + 3] = 1.0f;
     }
     return img;
+}
+
+// The AO radius of a job: absolute, or a fraction of the scene's bounding-box diagonal.
+float ao_radius(canopy::compiled_scene const& scene, render_job const& job) {
+    if (job.ao_radius > 0.0f) return job.ao_radius;
+    float const diagonal = canopy::length(canopy::diagonal(scene.bounds()));
+    float const radius = job.ao_radius_fraction * diagonal;
+    if (!(radius > 0.0f && std::isfinite(radius)))
+        throw canopy::scene_error(job.scene_name, "",
+                                  fmt::format("the AO radius, {:g}% of the bounding-box diagonal ({:g}), is not a "
+                                              "positive finite length: give --ao-radius in scene units",
+                                              double(job.ao_radius_fraction) * 100.0, double(diagonal)));
+    return radius;
 }
 
 // Shades every pixel with kernel(ray, isect, rng) averaged over spp jittered samples.
@@ -299,13 +519,15 @@ canopy::framebuffer render_with(render_job const& job, I const& prototype, Kerne
 template <typename I>
 canopy::framebuffer render_kernel(counting_scene const& scene, render_job const& job, I const& prototype,
                                   progress_bar& bar) {
-    if (job.kernel == "ao")
+    if (job.kernel == "ao") {
+        float const radius = ao_radius(*scene.scene, job);
         return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
-            return canopy::ao_kernel(scene, r, isect, rng, 8, 2.0f);
+            return canopy::ao_kernel(scene, r, isect, rng, 8, radius);
         }, bar);
+    }
     // The path kernel adds a point light (the scene's, or one above the middle of the scene) to
     // the sun and the sky.
-    canopy::light_options const light = lights_of(*scene.scene);
+    canopy::light_options const light = lights_of(*scene.scene, job.scene_name);
     if (job.kernel == "path")
         return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
             return canopy::path_kernel(scene, r, isect, rng, 3, light);
@@ -362,7 +584,10 @@ canopy::framebuffer render_heatmap(counting_scene const& scene, render_job const
     return fb;
 }
 
+// Renders and writes one image. An image with NaN pixels is written (black there) and reported
+// as an error: radiance that is not a number is a fault of the scene or of the renderer.
 render_result render_image(canopy::compiled_scene const& scene, render_job const& job) {
+    step("rendering " + job.output.string());
     std::atomic<std::uint64_t> rays{0};
     counting_scene const counted{&scene, &rays};
     progress_bar bar(job.output.filename().string());
@@ -386,8 +611,12 @@ render_result render_image(canopy::compiled_scene const& scene, render_job const
         fb = render_kernel(counted, job, canopy::default_intersector{}, bar);
     }
     render_result result{seconds_since(start), rays.load()};
-    std::filesystem::create_directories(job.output.parent_path());
-    canopy::write_image(job.output, to_display(fb, linear));
+    step("writing " + job.output.string());
+    std::size_t nan_pixels = 0;
+    canopy::write_image(job.output, to_display(fb, linear, job, nan_pixels));
+    if (nan_pixels > 0)
+        throw std::runtime_error(fmt::format("{}: {} of {} pixels are not a number (NaN radiance, written black)",
+                                             job.output.string(), nan_pixels, fb.pixels.size()));
     return result;
 }
 
@@ -401,8 +630,12 @@ canopy::texture2d<canopy::vec4<float>> load_texture(std::filesystem::path const&
 
 // The registry of built-in plugins, plus shared-library plugins named on the command line.
 canopy::registry& plugin_registry(std::vector<std::string> const& plugin_files) {
+    step("loading the plugins of CANOPY_PLUGIN_PATH");
     canopy::registry& r = canopy::builtin_registry();
-    for (auto const& f : plugin_files) r.load_plugin(f);
+    for (auto const& f : plugin_files) {
+        step("loading plugin " + f);
+        r.load_plugin(f);
+    }
     return r;
 }
 
@@ -413,141 +646,256 @@ struct loaded_graph {
     double load_seconds = 0.0;
 };
 
+// gen:NAME[:KEY=VALUE,...] read into the generator's name and parameters (usage errors: an item
+// that is not KEY=VALUE, a key given twice); nothing for a file.
+struct generator_call {
+    std::string name;
+    canopy::parameters params;
+};
+
+std::optional<generator_call> parse_generator(std::string const& spec) {
+    if (!spec.starts_with("gen:")) return std::nullopt;
+    std::string_view rest = std::string_view(spec).substr(4);
+    auto const colon = rest.find(':');
+    generator_call call{std::string(rest.substr(0, colon)), {}};
+    if (call.name.empty()) throw usage_error("gen: needs a generator name (gen:NAME[:KEY=VALUE,...])");
+    if (colon == std::string_view::npos) return call;
+    rest.remove_prefix(colon + 1);
+    while (!rest.empty()) {
+        auto const comma = std::min(rest.find(','), rest.size());
+        std::string_view const item = rest.substr(0, comma);
+        auto const eq = item.find('=');
+        if (eq == std::string_view::npos || eq == 0)
+            throw usage_error("generator parameter " + quote(item) + " is not KEY=VALUE");
+        std::string key(item.substr(0, eq));
+        if (call.params.has(key)) throw usage_error("generator parameter " + quote(key) + " given more than once");
+        call.params.set(std::move(key), std::string(item.substr(eq + 1)));
+        rest.remove_prefix(std::min(comma + 1, rest.size()));
+    }
+    return call;
+}
+
 loaded_graph load_and_compile(std::string const& spec, canopy::registry const& r) {
     loaded_graph out;
+    step("loading " + spec);
     auto const start = clock_type::now();
-    if (spec.starts_with("gen:")) {
-        std::string_view rest = std::string_view(spec).substr(4);
-        auto const colon = rest.find(':');
-        std::string const name(rest.substr(0, colon));
-        canopy::parameters params;
-        if (colon != std::string_view::npos) {
-            rest.remove_prefix(colon + 1);
-            while (!rest.empty()) {
-                auto const comma = std::min(rest.find(','), rest.size());
-                std::string_view const item = rest.substr(0, comma);
-                auto const eq = item.find('=');
-                if (eq == std::string_view::npos || eq == 0)
-                    throw usage_error("generator parameter '" + std::string(item) + "' is not KEY=VALUE");
-                params.set(std::string(item.substr(0, eq)), std::string(item.substr(eq + 1)));
-                rest.remove_prefix(std::min(comma + 1, rest.size()));
-            }
-        }
-        r.generate(out.graph, name, params, out.graph.root());
+    if (auto const call = parse_generator(spec)) {
+        r.generate(out.graph, call->name, call->params, out.graph.root());
     } else {
         r.load(out.graph, spec, out.graph.root());
     }
     out.load_seconds = seconds_since(start);
+    step("compiling " + spec);
     out.compiled = canopy::compile(out.graph, {.plugins = &r, .name = spec});
     return out;
 }
 
-// The scene's own lights replace the default sun / point light where it has them.
-canopy::light_options lights_of(canopy::compiled_scene const& scene) {
+std::string text(canopy::vec3<float> v) { return fmt::format("({:g}, {:g}, {:g})", v.x, v.y, v.z); }
+
+// The scene's own lights replace the default sun / point light where it has them. The default
+// point light stands above the middle of the scene, its intensity growing with the scene's size.
+canopy::light_options lights_of(canopy::compiled_scene const& scene, std::string const& spec) {
     canopy::light_options light;
-    canopy::aabb const box = scene.bounds();
-    float const extent = canopy::length(canopy::diagonal(box));
-    light.point_position = canopy::center(box) + canopy::vec3<float>(0.0f, 0.35f * extent, 0.0f);
-    light.point_intensity = canopy::vec3<float>(1.0f, 0.8f, 0.6f) * (0.05f * extent * extent);
-    light.point_light = true;
     bool sun = false, point = false;
     for (auto const& l : scene.lights) {
         if (l.kind == canopy::light_data::directional && !sun) {
             light.sun_direction = canopy::normalize(l.direction);
+            if (!canopy::all_finite(light.sun_direction) || !canopy::all_finite(l.colour))
+                throw canopy::scene_error(spec, "directional light",
+                                          "direction " + text(l.direction) + " or colour " + text(l.colour) +
+                                              " gives no finite light");
             light.sun_colour = l.colour;
             sun = true;
         } else if (l.kind == canopy::light_data::point && !point) {
+            if (!canopy::all_finite(l.position) || !canopy::all_finite(l.colour))
+                throw canopy::scene_error(spec, "point light",
+                                          "position " + text(l.position) + " or intensity " + text(l.colour) +
+                                              " is not finite");
             light.point_position = l.position;
             light.point_intensity = l.colour;
             point = true;
         }
     }
+    light.point_light = true;
+    if (!point) {
+        canopy::aabb const box = scene.bounds();
+        float const extent = canopy::length(canopy::diagonal(box));
+        light.point_position = canopy::center(box) + canopy::vec3<float>(0.0f, 0.35f * extent, 0.0f);
+        light.point_intensity = canopy::vec3<float>(1.0f, 0.8f, 0.6f) * (0.05f * extent * extent);
+        if (!canopy::all_finite(light.point_position) || !canopy::all_finite(light.point_intensity))
+            throw canopy::scene_error(spec, "",
+                                      fmt::format("the bounding box (diagonal {:g}) is beyond float range for the "
+                                                  "default point light of the path kernel: give the scene a point light",
+                                                  extent));
+    }
     return light;
 }
 
+// --size WxH: both whole numbers from 1 to 16384, W·H within the texel limit (the framebuffer
+// holds float RGBA per pixel, as a texture of that size would).
 std::pair<int, int> parse_size(std::string const& text) {
     auto const x = text.find('x');
-    int const w = x == std::string::npos ? 0 : std::atoi(text.substr(0, x).c_str());
-    int const h = x == std::string::npos ? 0 : std::atoi(text.substr(x + 1).c_str());
-    if (w < 1 || h < 1 || w > 16384 || h > 16384) throw usage_error("--size must be WxH, e.g. 800x600");
-    return {w, h};
+    auto const w = x == std::string::npos ? std::nullopt : whole_number(std::string_view(text).substr(0, x), 1, 16384);
+    auto const h = x == std::string::npos ? std::nullopt : whole_number(std::string_view(text).substr(x + 1), 1, 16384);
+    if (!w || !h)
+        throw usage_error("--size must be WxH with W and H whole numbers from 1 to 16384 (e.g. 800x600), not " +
+                          quote(text));
+    std::uint64_t const limit = canopy::default_limits().max_texels;
+    if (*w * *h > limit)
+        throw usage_error(fmt::format("--size {}x{} is {} pixels, over the limit of {} (--max-texels)", *w, *h,
+                                      *w * *h, limit));
+    return {int(*w), int(*h)};
 }
 
-// Takes every `--plugin FILE` out of args (render and info accept it, repeated); the other
-// arguments stay, in order, in `rest`.
-std::vector<std::string> take_plugin_files(std::span<char*> args, std::vector<char*>& rest) {
-    std::vector<std::string> files;
-    for (std::size_t i = 0; i < args.size(); ++i) {
-        if (std::string_view(args[i]) != "--plugin") {
-            rest.push_back(args[i]);
-            continue;
-        }
-        if (i + 1 >= args.size()) throw usage_error("option '--plugin' needs a value");
-        files.emplace_back(args[++i]);
-    }
-    return files;
+// A camera from the scene's values, or a scene_error naming the camera when they give none.
+canopy::pinhole_camera checked_camera(std::string const& file, std::string const& where, canopy::vec3<float> eye,
+                                      canopy::vec3<float> target, canopy::vec3<float> up, float fovy, float aspect) {
+    std::string const problem = canopy::pinhole_camera::look_at_problem(eye, target, up, fovy, aspect);
+    if (!problem.empty()) throw canopy::scene_error(file, where, problem);
+    return canopy::pinhole_camera::look_at(eye, target, up, fovy, aspect);
+}
+
+// The scene's camera, or one looking at the middle of the scene's bounding box from above and
+// in front (+z), far enough to see all of it.
+canopy::pinhole_camera scene_camera(canopy::compiled_scene const& scene, std::string const& spec, float aspect) {
+    if (scene.camera)
+        return checked_camera(scene.camera_file.empty() ? spec : scene.camera_file,
+                              scene.camera_node.empty() ? "camera" : scene.camera_node, scene.camera->eye,
+                              scene.camera->target, scene.camera->up, scene.camera->fovy_degrees, aspect);
+    canopy::aabb const box = scene.bounds();
+    auto const c = canopy::center(box);
+    float const extent = canopy::length(canopy::diagonal(box));
+    canopy::vec3<float> const eye = c + canopy::vec3<float>(0.35f, 0.45f, 1.0f) * extent;
+    std::string const bounds = "the scene's bounds " + text(box.min) + " .. " + text(box.max);
+    if (!canopy::all_finite(box.min) || !canopy::all_finite(box.max) || !(box.min.x <= box.max.x) ||
+        !(box.min.y <= box.max.y) || !(box.min.z <= box.max.z) || !std::isfinite(extent) || !canopy::all_finite(eye))
+        throw canopy::scene_error(spec, "automatic camera",
+                                  bounds + " are empty or beyond float range: give the scene a camera");
+    if (!(extent > 0.0f))
+        throw canopy::scene_error(spec, "automatic camera",
+                                  bounds + " have no extent in float (a point, or a scene scaled to almost nothing): "
+                                           "give the scene a camera");
+    return checked_camera(spec, "automatic camera", eye, c, {0, 1, 0}, 45.0f, aspect);
 }
 
 int run_render(std::span<char*> all_args) {
-    std::vector<char*> args;
-    std::vector<std::string> const plugin_files = take_plugin_files(all_args, args);
-    std::optional<std::string> scene_path;
-    std::vector<char*> option_args;
-    for (std::size_t i = 0; i < args.size(); ++i) {
-        std::string_view const a = args[i];
-        if (!a.starts_with("-") && (i == 0 || !std::string_view(args[i - 1]).starts_with("-"))) {
-            if (scene_path) throw usage_error("more than one scene given");
-            scene_path = std::string(a);
-        } else {
-            option_args.push_back(args[i]);
-        }
+    arguments const args = parse_arguments(all_args, {{"-o"},
+                                                      {"--size"},
+                                                      {"--spp"},
+                                                      {"--kernel"},
+                                                      {"--intersector"},
+                                                      {"--ao-radius"},
+                                                      {"--exposure"},
+                                                      {"--tonemap"},
+                                                      {"--threads"},
+                                                      {"--plugin", true, true}});
+    if (args.help) {
+        std::fputs(render_usage.c_str(), stdout);
+        return 0;
     }
-    auto const options = parse_options(option_args, {"-o", "--size", "--spp", "--kernel", "--intersector", "--threads"},
-                                       render_usage);
+    if (args.positional.size() > 1)
+        throw usage_error("more than one scene given (" + quote(args.positional[0]) + ", " + quote(args.positional[1]) +
+                          ")");
+    std::optional<std::string> const scene_path =
+        args.positional.empty() ? std::nullopt : std::optional<std::string>(args.positional[0]);
+    auto const generator = scene_path ? parse_generator(*scene_path) : std::nullopt;
+    apply_limits(args);
+
     render_job base;
-    auto const [w, h] = parse_size(options.contains("--size") ? options.at("--size") : "800x600");
+    auto const [w, h] = parse_size(args.value_or("--size", "800x600"));
     base.width = w;
     base.height = h;
-    if (options.contains("--kernel")) base.kernel = options.at("--kernel");
+    base.kernel = args.value_or("--kernel", "primary");
     if (base.kernel != "primary" && base.kernel != "ao" && base.kernel != "path" && base.kernel != "heatmap")
-        throw usage_error("--kernel must be primary, ao, path or heatmap, not '" + base.kernel + "'");
-    base.intersector = options.contains("--intersector") ? options.at("--intersector") : "auto";
+        throw usage_error("--kernel must be primary, ao, path or heatmap, not " + quote(base.kernel));
+    base.intersector = args.value_or("--intersector", "auto");
     if (base.intersector != "auto" && base.intersector != "none" && base.intersector != "alpha" &&
         base.intersector != "procedural" && base.intersector != "bench" && base.intersector != "costs")
-        throw usage_error("--intersector must be auto, none, alpha, procedural, bench or costs, not '" +
-                          base.intersector + "'");
+        throw usage_error("--intersector must be auto, none, alpha, procedural, bench or costs, not " +
+                          quote(base.intersector));
+    bool const heatmap = base.kernel == "heatmap" || base.intersector == "costs";
+    if (!scene_path && args.has("--intersector"))
+        throw usage_error("--intersector applies to a SCENE: the demo renders each figure with its own intersector");
+    if (!scene_path && base.kernel == "heatmap")
+        throw usage_error("--kernel heatmap applies to a SCENE: the demo's fourth figure is the heat map");
+    if (base.intersector == "costs" && args.has("--kernel") && base.kernel != "heatmap")
+        throw usage_error("--intersector costs draws the heat map: it goes with --kernel heatmap, not " +
+                          quote(base.kernel));
+    if (base.kernel == "heatmap" && base.intersector != "auto" && base.intersector != "costs")
+        throw usage_error("--kernel heatmap counts the tests of the texture alpha mask's traversal: --intersector " +
+                          quote(base.intersector) + " does not apply");
+    if (heatmap && (args.has("--exposure") || args.has("--tonemap")))
+        throw usage_error("--exposure and --tonemap apply to shaded images, not to the heat map");
+    if (args.has("--ao-radius")) {
+        if (base.kernel != "ao") throw usage_error("--ao-radius applies to --kernel ao");
+        std::string_view text = args.value("--ao-radius");
+        bool const percent = text.ends_with('%');
+        if (percent) text.remove_suffix(1);
+        double const r = real_option("--ao-radius", text, 0.0,
+                                     percent ? 1e6 : double(std::numeric_limits<float>::max()),
+                                     "over 0: a length in scene units, or a percentage of the bounding-box diagonal "
+                                     "(e.g. 5%)");
+        if (!(float(r) > 0.0f))
+            throw usage_error("--ao-radius must be over 0, not " + quote(args.value("--ao-radius")));
+        if (percent) {
+            base.ao_radius_fraction = float(r / 100.0);
+        } else {
+            base.ao_radius = float(r);
+        }
+    }
+    if (args.has("--exposure"))
+        base.exposure_scale =
+            float(std::exp2(real_option("--exposure", args.value("--exposure"), -30.0, 30.0, "of stops from -30 to 30")));
+    std::string const tone = args.value_or("--tonemap", base.kernel == "path" ? "aces" : "none");
+    if (tone == "none") {
+        base.tone = canopy::tone_curve::none;
+    } else if (tone == "reinhard") {
+        base.tone = canopy::tone_curve::reinhard;
+    } else if (tone == "aces") {
+        base.tone = canopy::tone_curve::aces;
+    } else {
+        throw usage_error("--tonemap must be none, reinhard or aces, not " + quote(tone));
+    }
     base.spp = base.kernel == "ao" || base.kernel == "path" ? 16 : 1;
-    if (options.contains("--spp")) {
-        base.spp = std::atoi(options.at("--spp").c_str());
-        if (base.spp < 1 || base.spp > 65536) throw usage_error("--spp needs a positive number");
-    }
+    if (args.has("--spp")) base.spp = int(whole_option(args, "--spp", 1, 65536));
     std::optional<tbb::global_control> threads;
-    if (options.contains("--threads")) {
-        int const n = std::atoi(options.at("--threads").c_str());
-        if (n < 1) throw usage_error("--threads needs a positive number");
-        threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(n));
-    }
-    std::filesystem::path const out = options.contains("-o") ? options.at("-o") : "out";
+    limit_threads(args, threads);
+    std::filesystem::path const out = args.value_or("-o", "out");
     float const aspect = float(base.width) / float(base.height);
 
+    // The output files, checked before anything is loaded or rendered.
+    struct figure {
+        char const* file;
+        char const* kernel;
+        char const* intersector;
+    };
+    figure const figures[] = {{"1_billboards_alpha_ignored.png", nullptr, "none"},
+                              {"2_texture_alpha_mask.png", nullptr, "alpha"},
+                              {"3_procedural_alpha_mask.png", nullptr, "procedural"},
+                              {"4_bvh_cost_heatmap.png", "heatmap", "costs"}};
+    prepare_folder(out);
+    if (!scene_path) {
+        for (auto const& f : figures) check_writable(out / f.file);
+    } else {
+        std::string stem = generator ? generator->name : std::filesystem::path(*scene_path).stem().string();
+        if (stem.empty()) stem = "scene";
+        base.output = out / (stem + ".png");
+        check_writable(base.output);
+    }
+
+    canopy::registry const& registry = plugin_registry(args.values("--plugin"));
     std::vector<std::pair<std::string, render_result>> results;
     auto const build_start = clock_type::now();
     if (!scene_path) {
-        auto forest = canopy::make_billboard_forest(load_texture(std::filesystem::path(CANOPY_ASSET_DIR) / "tree.png"));
+        std::filesystem::path const texture = std::filesystem::path(CANOPY_ASSET_DIR) / "tree.png";
+        step("loading " + texture.string());
+        auto forest = canopy::make_billboard_forest(load_texture(texture));
         double const build_seconds = seconds_since(build_start);
+        base.scene_name = "demo scene";
         base.camera = canopy::pinhole_camera::look_at(forest.camera_eye, forest.camera_target, {0, 1, 0},
                                                       forest.camera_fovy, aspect);
         fmt::print(stderr, "demo scene: {} instances of {} meshes, built in {:.1f} ms\n",
                    forest.scene.top_mesh_instances.size(), forest.scene.meshes.size(), build_seconds * 1e3);
-        struct figure {
-            char const* file;
-            char const* kernel;
-            char const* intersector;
-        };
-        figure const figures[] = {{"1_billboards_alpha_ignored.png", nullptr, "none"},
-                                  {"2_texture_alpha_mask.png", nullptr, "alpha"},
-                                  {"3_procedural_alpha_mask.png", nullptr, "procedural"},
-                                  {"4_bvh_cost_heatmap.png", "heatmap", "costs"}};
         for (auto const& f : figures) {
             render_job job = base;
             if (f.kernel) job.kernel = f.kernel;
@@ -556,7 +904,6 @@ int run_render(std::span<char*> all_args) {
             results.emplace_back(job.output.string(), render_image(forest.scene, job));
         }
     } else {
-        canopy::registry const& registry = plugin_registry(plugin_files);
         auto const loaded = load_and_compile(*scene_path, registry);
         canopy::compiled_scene const& scene = loaded.compiled;
         auto const& st = scene.statistics;
@@ -564,33 +911,22 @@ int run_render(std::span<char*> all_args) {
                            "compiled in {:.1f} ms\n",
                    *scene_path, st.triangles_placed, st.meshes_built, st.placements, st.levels, st.levels == 1 ? "" : "s",
                    loaded.load_seconds * 1e3, st.build_seconds * 1e3);
-        if (scene.camera) {
-            base.camera = canopy::pinhole_camera::look_at(scene.camera->eye, scene.camera->target, scene.camera->up,
-                                                          scene.camera->fovy_degrees, aspect);
-        } else {
-            canopy::aabb const box = scene.bounds();
-            auto const c = canopy::center(box);
-            float const extent = canopy::length(canopy::diagonal(box));
-            base.camera = canopy::pinhole_camera::look_at(c + canopy::vec3<float>(0.35f, 0.45f, 1.0f) * extent, c,
-                                                          {0, 1, 0}, 45.0f, aspect);
-        }
+        base.scene_name = *scene_path;
+        base.camera = scene_camera(scene, *scene_path, aspect);
         if (base.intersector == "auto") base.intersector = st.alpha_mask_needed ? "alpha" : "none";
-        std::string stem = std::filesystem::path(*scene_path).stem().string();
-        if (scene_path->starts_with("gen:")) stem = scene_path->substr(4, scene_path->find(':', 4) - 4);
-        base.output = out / (stem + ".png");
         results.emplace_back(base.output.string(), render_image(scene, base));
     }
     double total_seconds = 0.0;
     std::uint64_t total_rays = 0;
+    auto const mrays = [](std::uint64_t rays, double seconds) { return seconds > 0.0 ? double(rays) / seconds * 1e-6 : 0.0; };
     for (auto const& [file, r] : results) {
-        fmt::print("{}: {:.1f} ms, {} rays, {:.2f} Mrays/s\n", file, r.seconds * 1e3, r.rays,
-                   double(r.rays) / r.seconds * 1e-6);
+        fmt::print("{}: {:.1f} ms, {} rays, {:.2f} Mrays/s\n", file, r.seconds * 1e3, r.rays, mrays(r.rays, r.seconds));
         total_seconds += r.seconds;
         total_rays += r.rays;
     }
     fmt::print("rendered {} image{} ({}x{}, {} spp) in {:.2f} s: {} rays, {:.2f} Mrays/s\n", results.size(),
                results.size() == 1 ? "" : "s", base.width, base.height, base.spp, total_seconds, total_rays,
-               double(total_rays) / total_seconds * 1e-6);
+               mrays(total_rays, total_seconds));
     return 0;
 }
 
@@ -608,27 +944,19 @@ void print_registered(char const* what, std::vector<canopy::registered> const& l
 }
 
 int run_info(std::span<char*> all_args) {
-    std::vector<char*> args;
-    std::vector<std::string> const plugin_files = take_plugin_files(all_args, args);
-    std::optional<std::string> scene_path;
-    bool list_plugins = false;
-    for (std::size_t i = 0; i < args.size(); ++i) {
-        std::string_view const a = args[i];
-        if (a == "--help" || a == "-h") {
-            std::fputs(info_usage, stdout);
-            return 0;
-        }
-        if (a == "--plugins") {
-            list_plugins = true;
-        } else if (a.starts_with("-")) {
-            throw usage_error("unknown option '" + std::string(a) + "'");
-        } else {
-            if (scene_path) throw usage_error("info takes exactly one scene");
-            scene_path = std::string(a);
-        }
+    arguments const args = parse_arguments(all_args, {{"--plugins", false}, {"--plugin", true, true}});
+    if (args.help) {
+        std::fputs(info_usage.c_str(), stdout);
+        return 0;
     }
-    if (list_plugins == scene_path.has_value()) throw usage_error("info takes exactly one scene, or --plugins");
-    canopy::registry const& registry = plugin_registry(plugin_files);
+    if (args.positional.size() > 1)
+        throw usage_error("info takes one scene, not " + std::to_string(args.positional.size()) + " (" +
+                          quote(args.positional[0]) + ", " + quote(args.positional[1]) + ", ...)");
+    bool const list_plugins = args.has("--plugins");
+    if (list_plugins == !args.positional.empty()) throw usage_error("info takes exactly one scene, or --plugins");
+    if (!list_plugins) parse_generator(args.positional.front()); // usage errors before any work
+    apply_limits(args);
+    canopy::registry const& registry = plugin_registry(args.values("--plugin"));
     if (list_plugins) {
         print_registered("file loaders (the first of an extension is its default)", registry.loaders());
         print_registered("image loaders", registry.image_loaders());
@@ -638,11 +966,12 @@ int run_info(std::span<char*> all_args) {
         for (auto const& p : registry.plugins()) fmt::print("  {}\n", p);
         return 0;
     }
-    auto const loaded = load_and_compile(*scene_path, registry);
+    std::string const scene_path = args.positional.front();
+    auto const loaded = load_and_compile(scene_path, registry);
     canopy::scene const& g = loaded.graph;
     canopy::compiled_scene const& c = loaded.compiled;
     auto const& st = c.statistics;
-    fmt::print("scene {}: loaded in {:.3f} ms\n", *scene_path, loaded.load_seconds * 1e3);
+    fmt::print("scene {}: loaded in {:.3f} ms\n", scene_path, loaded.load_seconds * 1e3);
     fmt::print("graph: {} nodes, {} meshes, {} materials, {} images, {} cameras, {} lights\n", g.nodes().size(),
                g.meshes().size(), g.materials().size(), g.images().size(), st.cameras, st.lights);
     fmt::print("compiled in {:.3f} ms: {} instance level{}, {} meshes built ({} triangles stored), {} placements "
@@ -671,6 +1000,50 @@ int run_info(std::span<char*> all_args) {
     return 0;
 }
 
+// Standard output is checked at exit: output lost to a full disk is an error, not a success.
+int finish_standard_output(int status) {
+    errno = 0;
+    if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
+        std::fprintf(stderr, "canopy: cannot write to standard output: %s\n", os_reason(errno).c_str());
+        return 1;
+    }
+    return status;
+}
+
+int run(std::string_view command, std::span<char*> args) {
+    try {
+        if (command == "--help" || command == "-h") {
+            std::fputs(main_usage, stdout);
+            return 0;
+        }
+        if (command == "render") return run_render(args);
+        if (command == "trace") return run_trace(args);
+        if (command == "info") return run_info(args);
+        throw usage_error("unknown command " + quote(command));
+    } catch (usage_error const& e) {
+        bool const known = command == "trace" || command == "render" || command == "info";
+        std::fprintf(stderr, "canopy%s%s: %s\n%s", known ? " " : "", known ? std::string(command).c_str() : "",
+                     e.what(),
+                     command == "trace"    ? trace_usage.c_str()
+                     : command == "render" ? render_usage.c_str()
+                     : command == "info"   ? info_usage.c_str()
+                                           : main_usage);
+        return 2;
+    } catch (std::bad_alloc const&) {
+        std::fprintf(stderr, "canopy: out of memory while %s\n", current_step.c_str());
+        return 1;
+    } catch (std::length_error const& e) {
+        std::fprintf(stderr, "canopy: an allocation too large for memory while %s (%s)\n", current_step.c_str(), e.what());
+        return 1;
+    } catch (std::exception const& e) {
+        std::fprintf(stderr, "canopy: %s\n", e.what());
+        return 1;
+    } catch (...) {
+        std::fprintf(stderr, "canopy: unexpected error while %s\n", current_step.c_str());
+        return 1;
+    }
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -679,25 +1052,5 @@ int main(int argc, char** argv) {
         std::fputs(main_usage, stderr);
         return 2;
     }
-    std::string_view const command = args[1];
-    try {
-        if (command == "--help" || command == "-h") {
-            std::fputs(main_usage, stdout);
-            return 0;
-        }
-        if (command == "render") return run_render(args.subspan(2));
-        if (command == "trace") return run_trace(args.subspan(2));
-        if (command == "info") return run_info(args.subspan(2));
-        throw usage_error("unknown command '" + std::string(command) + "'");
-    } catch (usage_error const& e) {
-        std::fprintf(stderr, "canopy %s: %s\n%s", std::string(command).c_str(), e.what(),
-                     command == "trace"    ? trace_usage
-                     : command == "render" ? render_usage
-                     : command == "info"   ? info_usage
-                                           : main_usage);
-        return 2;
-    } catch (std::exception const& e) {
-        std::fprintf(stderr, "canopy: %s\n", e.what());
-        return 1;
-    }
+    return finish_standard_output(run(args[1], args.subspan(2)));
 }

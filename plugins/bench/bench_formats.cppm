@@ -240,10 +240,14 @@ inline void write_bench_hits(std::filesystem::path const& file, std::vector<benc
         std::memcpy(p + 12, &hits[i].u, 4);
         std::memcpy(p + 16, &hits[i].v, 4);
     }
+    // Checked after closing: a full disk (or /dev/full) is an error with the system's reason.
+    auto const reason = [] { return std::string(errno != 0 ? std::strerror(errno) : "unknown error"); };
+    errno = 0;
     std::ofstream out(file, std::ios::binary | std::ios::trunc);
-    if (!out) detail::fail(file, 0, "cannot open file for writing");
+    if (!out) detail::fail(file, 0, "cannot open file for writing: " + reason());
     out.write(buffer.data(), std::streamsize(buffer.size()));
-    if (!out) detail::fail(file, 0, "write error");
+    out.close();
+    if (!out) detail::fail(file, 0, "cannot write: " + reason());
 }
 
 inline std::vector<bench_hit> read_bench_hits(std::filesystem::path const& file) {
@@ -268,10 +272,14 @@ inline void write_bench_rays(std::filesystem::path const& file, std::vector<ray>
                             rays[i].direction.x, rays[i].direction.y, rays[i].direction.z, rays[i].tmax};
         std::memcpy(buffer.data() + 32 * i, f, sizeof f);
     }
+    // Checked after closing: a full disk (or /dev/full) is an error with the system's reason.
+    auto const reason = [] { return std::string(errno != 0 ? std::strerror(errno) : "unknown error"); };
+    errno = 0;
     std::ofstream out(file, std::ios::binary | std::ios::trunc);
-    if (!out) detail::fail(file, 0, "cannot open file for writing");
+    if (!out) detail::fail(file, 0, "cannot open file for writing: " + reason());
     out.write(buffer.data(), std::streamsize(buffer.size()));
-    if (!out) detail::fail(file, 0, "write error");
+    out.close();
+    if (!out) detail::fail(file, 0, "cannot write: " + reason());
 }
 
 } // namespace canopy

@@ -1,10 +1,14 @@
 // Implementation of canopy.image_io on OpenImageIO 2.4.
 module;
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <vector>
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 module canopy.image_io;
 
@@ -14,6 +18,9 @@ namespace {
 [[noreturn]] void fail(std::filesystem::path const& path, std::string const& what) {
     throw image_error(path.string() + ": " + what);
 }
+
+// The reason of the last failed system call.
+std::string os_reason() { return errno != 0 ? std::strerror(errno) : "unknown error"; }
 } // namespace
 
 rgba_image read_image(std::filesystem::path const& path) {
@@ -63,9 +70,21 @@ void write_image(std::filesystem::path const& path, rgba_image const& image) {
     std::vector<float> clamped(image.pixels);
     if (eight_bit)
         for (float& v : clamped) v = std::clamp(v, 0.0f, 1.0f);
+    // Encoded in memory when the format allows (OpenImageIO's file writers do not report a full
+    // disk), then written and checked after closing here.
+    std::vector<unsigned char> encoded;
+    OIIO::Filesystem::IOVecOutput memory(encoded);
+    bool const in_memory = out->supports("ioproxy") && out->set_ioproxy(&memory);
     if (!out->open(path.string(), spec)) fail(path, "cannot open for writing: " + out->geterror());
     if (!out->write_image(OIIO::TypeDesc::FLOAT, clamped.data())) fail(path, "cannot write: " + out->geterror());
     if (!out->close()) fail(path, "cannot finish writing: " + out->geterror());
+    if (!in_memory) return;
+    errno = 0;
+    std::ofstream file(path, std::ios::binary | std::ios::trunc);
+    if (!file) fail(path, "cannot open for writing: " + os_reason());
+    file.write(reinterpret_cast<char const*>(encoded.data()), std::streamsize(encoded.size()));
+    file.close();
+    if (!file) fail(path, "cannot write: " + os_reason());
 }
 
 } // namespace canopy

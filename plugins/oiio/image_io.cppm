@@ -4,7 +4,8 @@
 //   read_image(path)          any image → RGBA float, row 0 at the top; grey → RGB, missing
 //                             alpha → 1; 8/16-bit data scaled to [0, 1]
 //   write_image(path, image)  RGBA float → the file's format; values are clamped to [0, 1] and
-//                             quantised for 8-bit formats (PNG, JPEG)
+//                             quantised for 8-bit formats (PNG, JPEG); the file is checked after
+//                             closing (a full disk or /dev/full is an error, with the OS reason)
 //
 // Failures throw image_error naming the file and OpenImageIO's reason (missing file, unknown
 // format, truncated data). OpenImageIO's headers stay in the implementation unit.
