@@ -12,11 +12,18 @@ module;
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <limits>
+#include <new>
 #include <optional>
+#include <set>
 #include <string>
+#include <string_view>
+#include <system_error>
 #include <utility>
 #include <vector>
 #include <tiny_gltf.h>
+
+#include "gltf_schema.hpp"
 module canopy.plugins.gltf;
 import canopy.math;
 import canopy.scene;
@@ -27,16 +34,146 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// tinygltf's image callback: embedded images (data: URIs, buffer views) are decoded by tinygltf's
-// stb_image decoder; images referred to by uri are left undecoded and read later through the
-// registry's image loaders.
-bool decode_embedded_image(tinygltf::Image* image, int index, std::string* err, std::string* warn, int width,
-                           int height, unsigned char const* bytes, int size, void*) {
-    if (!image->uri.empty()) return true;
-    return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, nullptr);
+// A string from the file, quoted and cut to a short prefix.
+std::string shown(std::string_view s) {
+    constexpr std::size_t longest = 40;
+    return "'" + std::string(s.substr(0, longest)) + (s.size() > longest ? "…'" : "'");
 }
 
-// tinygltf's messages: lines joined with "; ", without the trailing newline.
+// What tinygltf may read besides the file itself, and what it was refused. tinygltf reads external
+// buffers and images through these callbacks: each file must be a regular file within
+// --max-file-bytes in the glTF file's folder (tinygltf would also look in the working folder);
+// images referred to by uri are not read here but later, through the registry's image loaders.
+struct file_access {
+    std::string base_dir;                 // as tinygltf joins uris to it
+    std::vector<std::string> buffer_paths; // buffers[i]'s file, as tinygltf names it ("" for data: URIs)
+    std::set<std::string> image_paths;    // images' files, as tinygltf names them
+    std::optional<scene_error> refused;   // the first file or embedded image refused
+    std::string refused_where;            // its element ("buffers[0]", "images[2]")
+};
+
+// tinygltf's own path of a uri: dlib::urldecode ('+' is a space) joined to the base folder.
+std::string tinygltf_path(std::string const& base_dir, std::string const& uri) {
+    auto const hex = [](char c) {
+        if (c >= '0' && c <= '9') return c - '0';
+        if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+        if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+        return 0;
+    };
+    std::string decoded;
+    for (std::size_t i = 0; i < uri.size(); ++i) {
+        if (uri[i] == '+') {
+            decoded += ' ';
+        } else if (uri[i] == '%' && uri.size() > i + 2) {
+            decoded += char(hex(uri[i + 1]) << 4 | hex(uri[i + 2]));
+            i += 2;
+        } else {
+            decoded += uri[i];
+        }
+    }
+    if (base_dir.empty()) return decoded;
+    return base_dir.back() == '/' ? base_dir + decoded : base_dir + "/" + decoded;
+}
+
+bool file_exists(std::string const& path, void* user) {
+    auto const& access = *static_cast<file_access const*>(user);
+    if (!access.base_dir.empty() && !path.starts_with(access.base_dir)) return false;
+    std::error_code ec;
+    return fs::exists(path, ec);
+}
+
+std::string expand_file_path(std::string const& path, void*) { return path; }
+
+bool read_whole_file(std::vector<unsigned char>* out, std::string* err, std::string const& path, void* user) {
+    auto& access = *static_cast<file_access*>(user);
+    if (access.image_paths.contains(path)) {
+        *err = "read later through the image loaders";
+        return false;
+    }
+    std::string where = "buffers";
+    for (std::size_t i = 0; i < access.buffer_paths.size(); ++i)
+        if (access.buffer_paths[i] == path) where = "buffers[" + std::to_string(i) + "]";
+    try {
+        std::uint64_t const size = require_regular_file(path, default_limits().max_file_bytes, "buffer");
+        out->resize(std::size_t(size));
+        std::ifstream in(path, std::ios::binary);
+        in.read(reinterpret_cast<char*>(out->data()), std::streamsize(size));
+        if (!in || std::uint64_t(in.gcount()) != size) throw scene_error(path, "", "cannot be read (buffer)");
+        return true;
+    } catch (scene_error const& e) {
+        if (!access.refused) access.refused = e, access.refused_where = where;
+    } catch (std::bad_alloc const&) {
+        if (!access.refused) access.refused = scene_error(path, "", "out of memory while reading it (buffer)"), access.refused_where = where;
+    }
+    *err = access.refused->what();
+    return false;
+}
+
+bool write_whole_file(std::string* err, std::string const&, std::vector<unsigned char> const&, void*) {
+    *err = "not written";
+    return false;
+}
+
+// Width and height from a PNG or JPEG header (the formats glTF allows for images), without
+// decoding; nullopt for any other data.
+std::optional<std::pair<std::uint32_t, std::uint32_t>> image_size(unsigned char const* p, std::size_t n) {
+    auto const be16 = [&](std::size_t i) { return std::uint32_t(p[i]) << 8 | p[i + 1]; };
+    auto const be32 = [&](std::size_t i) { return be16(i) << 16 | be16(i + 2); };
+    static constexpr unsigned char png[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    if (n >= 24 && std::memcmp(p, png, 8) == 0 && std::memcmp(p + 12, "IHDR", 4) == 0) return std::pair(be32(16), be32(20));
+    if (n < 4 || p[0] != 0xFF || p[1] != 0xD8) return std::nullopt;
+    // JPEG: the first start-of-frame segment (SOF0 to SOF15 but DHT, JPG and DAC) holds the size.
+    std::size_t i = 2;
+    while (i + 3 < n) {
+        if (p[i] != 0xFF) return std::nullopt;
+        unsigned char const marker = p[i + 1];
+        if (marker == 0xFF) {
+            ++i;
+            continue;
+        }
+        if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD9)) {
+            i += 2;
+            continue;
+        }
+        std::size_t const length = be16(i + 2);
+        bool const frame = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+        if (frame) return i + 8 < n ? std::optional(std::pair(be16(i + 7), be16(i + 5))) : std::nullopt;
+        if (length < 2) return std::nullopt;
+        i += 2 + length;
+    }
+    return std::nullopt;
+}
+
+// tinygltf's image callback: embedded images (data: URIs, buffer views) are checked by their
+// header (PNG or JPEG, at most --max-texels texels) and decoded by tinygltf's stb_image decoder;
+// images referred to by uri are left undecoded and read later through the registry's image loaders.
+bool decode_embedded_image(tinygltf::Image* image, int index, std::string* err, std::string* warn, int width,
+                           int height, unsigned char const* bytes, int size, void* user) {
+    if (!image->uri.empty()) return true;
+    auto& access = *static_cast<file_access*>(user);
+    std::string const where = "images[" + std::to_string(index) + "]";
+    auto const refuse = [&](std::string const& problem) {
+        if (!access.refused) access.refused = scene_error("", "", problem), access.refused_where = where;
+        *err = problem;
+        return false;
+    };
+    auto const dimensions = image_size(bytes, size < 0 ? 0 : std::size_t(size));
+    if (!dimensions) return refuse("embedded image is neither PNG nor JPEG");
+    auto const [w, h] = *dimensions;
+    std::uint64_t const texels = std::uint64_t(w) * h;
+    if (w == 0 || h == 0) return refuse("embedded image has no pixels (" + std::to_string(w) + " × " + std::to_string(h) + ")");
+    if (texels > default_limits().max_texels || w > (1u << 24) || h > (1u << 24))
+        return refuse("embedded image is " + std::to_string(w) + " × " + std::to_string(h) + " (" + std::to_string(texels) +
+                      " texels), over the limit of " + std::to_string(default_limits().max_texels) + " texels (--max-texels)");
+    try {
+        return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, nullptr);
+    } catch (std::bad_alloc const&) {
+        return refuse("out of memory while decoding the embedded image");
+    }
+}
+
+// tinygltf's messages: lines joined with "; ", without the trailing newline, each cut to a
+// short prefix (tinygltf quotes whole data: URIs).
 std::string tidy(std::string const& message) {
     std::string out;
     std::size_t start = 0;
@@ -45,6 +182,8 @@ std::string tidy(std::string const& message) {
         if (end == std::string::npos) end = message.size();
         std::string line = message.substr(start, end - start);
         while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+        constexpr std::size_t longest = 160;
+        if (line.size() > longest) line = line.substr(0, longest) + "…";
         if (!line.empty()) out += (out.empty() ? "" : "; ") + line;
         start = end + 1;
     }
@@ -144,8 +283,9 @@ public:
 
     node_id run(node_id parent) {
         for (auto const& ext : model_.extensionsRequired)
-            fail("extensionsRequired", "the file requires extension " + ext + ", which this loader does not support");
+            fail("extensionsRequired", "the file requires extension " + shown(ext) + ", which this loader does not support");
 
+        check_hierarchy();
         std::vector<int> roots;
         std::string roots_where;
         if (!model_.scenes.empty()) {
@@ -154,17 +294,15 @@ public:
                 fail("scene", "scene " + std::to_string(chosen) + " does not exist (" +
                                   std::to_string(model_.scenes.size()) + " scenes)");
             roots = model_.scenes[std::size_t(chosen)].nodes;
-            roots_where = index_name("scenes", chosen);
+            roots_where = index_name("scenes", chosen) + ".nodes";
+            for (int n : roots)
+                if (n >= 0 && std::size_t(n) < parents_.size() && parents_[std::size_t(n)] >= 0)
+                    fail(roots_where, index_name("nodes", n) + " is a child of " + index_name("nodes", parents_[std::size_t(n)]) +
+                                          ", not a root node");
         } else {
             // No scene: every node that is no node's child.
-            std::vector<bool> is_child(model_.nodes.size(), false);
             for (std::size_t n = 0; n < model_.nodes.size(); ++n)
-                for (int c : model_.nodes[n].children)
-                    if (c >= 0 && std::size_t(c) < model_.nodes.size()) is_child[std::size_t(c)] = true;
-            for (std::size_t n = 0; n < model_.nodes.size(); ++n)
-                if (!is_child[n]) roots.push_back(int(n));
-            if (roots.empty() && !model_.nodes.empty())
-                fail("nodes", "the file has no scene and every node is another node's child (a cycle)");
+                if (parents_[n] < 0) roots.push_back(int(n));
             roots_where = "nodes";
         }
 
@@ -188,8 +326,7 @@ public:
             pending const p = stack.back();
             stack.pop_back();
             std::string const where = index_name("nodes", p.node);
-            if (visited[std::size_t(p.node)])
-                fail(where, "is reached twice (it is the child of two nodes, listed twice, or on a cycle)");
+            if (visited[std::size_t(p.node)]) fail(where, "is reached twice (it is listed twice)");
             visited[std::size_t(p.node)] = true;
             tinygltf::Node const& n = model_.nodes[std::size_t(p.node)];
             std::string const name = n.name.empty() ? where : n.name;
@@ -217,6 +354,56 @@ private:
     }
 
     // ---- Nodes ----------------------------------------------------------------------------------
+
+    // The node hierarchy, before anything is added to the scene: the nodes must form disjoint
+    // trees (glTF 2.0, §3.5.3): at most one parent each, no node its own descendant; and no node
+    // deeper than max_depth. Walks parents with explicit lists (no recursion); fills parents_.
+    void check_hierarchy() {
+        std::size_t const count = model_.nodes.size();
+        parents_.assign(count, -1);
+        for (std::size_t p = 0; p < count; ++p)
+            for (int c : model_.nodes[p].children) {
+                if (c < 0 || std::size_t(c) >= count)
+                    fail(index_name("nodes", p) + ".children", "node " + std::to_string(c) + " does not exist (" +
+                                                                  std::to_string(count) + " nodes)");
+                int& parent = parents_[std::size_t(c)];
+                if (parent >= 0)
+                    fail(index_name("nodes", c), "is a child of both " + index_name("nodes", parent) + " and " +
+                                                     index_name("nodes", p) + " (a glTF node has at most one parent)");
+                parent = int(p);
+            }
+        std::uint64_t const max_depth = default_limits().max_depth;
+        std::vector<std::uint64_t> depth(count, 0); // 0: not known yet
+        std::vector<char> on_path(count, 0);
+        std::vector<std::size_t> path;              // from a node up towards its root
+        for (std::size_t start = 0; start < count; ++start) {
+            path.clear();
+            std::size_t k = start;
+            while (depth[k] == 0 && !on_path[k] && parents_[k] >= 0) {
+                on_path[k] = 1;
+                path.push_back(k);
+                k = std::size_t(parents_[k]);
+            }
+            if (on_path[k]) {
+                // k is its own ancestor: the cycle is path's part from k on, read downwards.
+                auto const from = std::find(path.begin(), path.end(), k);
+                std::string cycle = index_name("nodes", k);
+                std::size_t shown = 0;
+                for (auto it = path.end(); it != from && shown < 8; ++shown) cycle += " → " + index_name("nodes", *--it);
+                if (std::size_t(path.end() - from) > 8) cycle += " → …";
+                fail(index_name("nodes", k), "is its own descendant (" + cycle + ")");
+            }
+            if (depth[k] == 0) depth[k] = 1; // a root
+            for (auto it = path.rbegin(); it != path.rend(); ++it) {
+                depth[*it] = depth[std::size_t(parents_[*it])] + 1;
+                on_path[*it] = 0;
+                if (depth[*it] > max_depth)
+                    fail(index_name("nodes", *it), "is " + std::to_string(depth[*it]) +
+                                                       " levels deep in the node hierarchy, over the limit of " +
+                                                       std::to_string(max_depth) + " (--max-depth)");
+            }
+        }
+    }
 
     affine_transform<float> transform_of(tinygltf::Node const& n, std::string const& where) const {
         affine_transform<double> xf = affine_transform<double>::identity();
@@ -266,8 +453,12 @@ private:
             xf.linear = linear;
             if (!n.translation.empty()) xf.translation = vec3<double>(n.translation[0], n.translation[1], n.translation[2]);
         }
-        return {{vec3<float>(xf.linear.col0), vec3<float>(xf.linear.col1), vec3<float>(xf.linear.col2)},
-                vec3<float>(xf.translation)};
+        affine_transform<float> const out{{vec3<float>(xf.linear.col0), vec3<float>(xf.linear.col1), vec3<float>(xf.linear.col2)},
+                                          vec3<float>(xf.translation)};
+        for (auto const& v : {out.linear.col0, out.linear.col1, out.linear.col2, out.translation})
+            if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+                fail(where, "transform has a value beyond the range of a float");
+        return out;
     }
 
     void place_mesh(int mesh, node_id under, std::string const& where, std::string const& name) {
@@ -454,6 +645,9 @@ private:
         // Positions.
         int const position = accessor_index(p.attributes, "POSITION", where);
         if (position < 0) fail(where, "has no POSITION attribute");
+        resource_limits const& limits = default_limits();
+        check_limit(name_, where, model_.accessors[std::size_t(position)].count, limits.max_triangles, "vertices",
+                    "--max-triangles");
         std::vector<double> const xyz = read_attribute(position, "POSITION", 3, false, std::size_t(-1), where);
         std::size_t const vertices = xyz.size() / 3;
         if (vertices > std::size_t(UINT32_MAX)) fail(where, "has more than 2^32 - 1 vertices");
@@ -470,6 +664,8 @@ private:
                 fail(where, what + ": component type " + std::to_string(type) +
                                 " is not allowed (unsigned byte, short or int needed)");
             std::size_t count = 0;
+            check_limit(name_, where, model_.accessors[std::size_t(p.indices)].count, 3 * limits.max_triangles, "indices",
+                        "--max-triangles");
             std::vector<double> const raw = read_accessor(p.indices, 1, where, what, count);
             indices.reserve(raw.size());
             for (std::size_t k = 0; k < raw.size(); ++k) {
@@ -489,6 +685,8 @@ private:
         std::string const mesh_name = m.name.empty() ? index_name("meshes", mesh) : m.name;
         md.name = m.primitives.size() == 1 ? mesh_name : mesh_name + "." + index_name("primitives", index);
         std::size_t const n = indices.size();
+        check_limit(name_, where, p.mode == TINYGLTF_MODE_TRIANGLES ? n / 3 : n < 3 ? 0 : n - 2, limits.max_triangles,
+                    "triangles", "--max-triangles");
         if (p.mode == TINYGLTF_MODE_TRIANGLES) {
             if (n % 3 != 0) fail(where, "has " + std::to_string(n) + " vertices in TRIANGLES mode (not a multiple of 3)");
             for (std::size_t k = 0; k < n; k += 3) md.triangles.push_back({indices[k], indices[k + 1], indices[k + 2]});
@@ -634,11 +832,13 @@ private:
         tinygltf::Image const& im = model_.images[std::size_t(index)];
         image_data out;
         if (!im.uri.empty()) {
+            if (im.uri.starts_with("data:"))
+                fail(where, "data: URI " + shown(im.uri) + " is not one tinygltf decodes (PNG or JPEG, base64)");
             fs::path const path = file_.parent_path() / decode_uri(im.uri);
             try {
                 out = r_.load_image(path);
             } catch (scene_error const& e) {
-                fail(where, "'" + im.uri + "': " + e.what());
+                fail(where, shown(im.uri) + ": " + e.what());
             }
             // baseColorTexture is sRGB by the glTF specification, whatever the file's tags.
             for (auto& t : out.texels) t = vec4<float>(srgb_to_linear(t.x), srgb_to_linear(t.y), srgb_to_linear(t.z), t.w);
@@ -686,38 +886,81 @@ private:
     std::string name_;
     scene& s_;
     registry const& r_;
+    std::vector<int> parents_; // each node's parent, -1 for none (check_hierarchy)
     std::vector<std::optional<int>> materials_;
     std::vector<std::optional<std::vector<std::uint32_t>>> meshes_;
     std::map<std::pair<int, double>, int> images_;
 };
 
-bool is_binary_gltf(fs::path const& file) {
-    std::ifstream in(file, std::ios::binary);
-    char magic[4] = {};
-    in.read(magic, 4);
-    return in.gcount() == 4 && std::memcmp(magic, "glTF", 4) == 0;
+// The JSON chunk of a .glb file, after checking its layout (glTF 2.0, §4.4: a 12-byte header,
+// a JSON chunk, an optional BIN chunk, each chunk's 8-byte header included in the length).
+std::string_view glb_json(std::string_view bytes, std::string const& name) {
+    auto const u32 = [&](std::size_t i) {
+        std::uint32_t v = 0;
+        for (std::size_t k = 0; k < 4; ++k) v |= std::uint32_t(static_cast<unsigned char>(bytes[i + k])) << (8 * k);
+        return std::uint64_t(v);
+    };
+    auto const fail = [&](std::string const& problem) { throw scene_error(name, "", "not a valid .glb file: " + problem); };
+    if (bytes.size() < 20) fail("shorter than its 20-byte header");
+    if (u32(4) != 2) fail("container version " + std::to_string(u32(4)) + " (2 needed)");
+    std::uint64_t const length = u32(8), json_length = u32(12);
+    if (length > bytes.size())
+        fail("its header declares " + std::to_string(length) + " bytes, the file has " + std::to_string(bytes.size()));
+    if (bytes.substr(16, 4) != "JSON") fail("its first chunk is not JSON");
+    if (json_length == 0 || 20 + json_length > length)
+        fail("its JSON chunk of " + std::to_string(json_length) + " bytes does not fit in " + std::to_string(length) + " bytes");
+    std::uint64_t const bin = 20 + json_length;
+    if (bin < length) {
+        if (bin + 8 > length) fail("its BIN chunk header does not fit");
+        std::uint64_t const bin_length = u32(bin);
+        if (bytes.substr(bin + 4, 4) != std::string_view("BIN\0", 4)) fail("its second chunk is not BIN");
+        if (bin_length < 4 || bin_length % 4 != 0 || bin + 8 + bin_length > length)
+            fail("its BIN chunk of " + std::to_string(bin_length) + " bytes does not fit in " + std::to_string(length) + " bytes");
+    }
+    return bytes.substr(20, json_length);
 }
 
-} // namespace
+node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id parent, registry const& r) {
+    std::string const name = file.string();
+    if (bytes.size() > std::numeric_limits<unsigned int>::max())
+        throw scene_error(name, "", "is " + std::to_string(bytes.size()) + " bytes, more than tinygltf reads (4 GiB)");
+    bool const binary = bytes.size() >= 4 && bytes.substr(0, 4) == "glTF";
+    std::string_view const json = binary ? glb_json(bytes, name) : bytes;
+    gltf_schema::document_uris const uris = gltf_schema::check_document(json, name, default_limits().max_depth);
 
-node_id load_gltf(scene& s, fs::path const& file, node_id parent, registry const& r) {
-    std::error_code ec;
-    if (!fs::is_regular_file(file, ec)) throw scene_error(file.string(), "", "no such file");
+    // The files tinygltf will ask for, as it names them.
+    file_access access;
+    access.base_dir = file.parent_path().string();
+    for (auto const& uri : uris.buffers)
+        access.buffer_paths.push_back(uri.empty() || uri.starts_with("data:") ? "" : tinygltf_path(access.base_dir, uri));
+    for (auto const& uri : uris.images)
+        if (!uri.empty() && !uri.starts_with("data:")) access.image_paths.insert(tinygltf_path(access.base_dir, uri));
+    for (auto const& b : access.buffer_paths) access.image_paths.erase(b);
+
     tinygltf::Model model;
     std::string err, warn;
     bool loaded = false;
     try {
         tinygltf::TinyGLTF loader;
-        loader.SetImageLoader(decode_embedded_image, nullptr);
-        loaded = is_binary_gltf(file) ? loader.LoadBinaryFromFile(&model, &err, &warn, file.string())
-                                      : loader.LoadASCIIFromFile(&model, &err, &warn, file.string());
+        loader.SetImageLoader(decode_embedded_image, &access);
+        loader.SetFsCallbacks({file_exists, expand_file_path, read_whole_file, write_whole_file, &access});
+        auto const* data = reinterpret_cast<unsigned char const*>(bytes.data());
+        auto const size = static_cast<unsigned int>(bytes.size());
+        loaded = binary ? loader.LoadBinaryFromMemory(&model, &err, &warn, data, size, access.base_dir)
+                        : loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(), size, access.base_dir);
+    } catch (std::bad_alloc const&) {
+        throw;
     } catch (std::exception const& e) {
-        throw scene_error(file.string(), "", std::string("tinygltf: ") + e.what());
+        throw scene_error(name, "", "tinygltf: " + tidy(e.what()));
     }
-    if (!loaded) throw scene_error(file.string(), "", tidy(err.empty() ? warn : err));
+    if (access.refused) {
+        std::string const problem = access.refused->file().empty() ? access.refused->problem() : access.refused->what();
+        throw scene_error(name, access.refused_where, problem);
+    }
+    if (!loaded) throw scene_error(name, "", tidy(err.empty() ? warn : err));
     if (!model.asset.version.starts_with("2"))
-        throw scene_error(file.string(), "asset.version",
-                          "glTF '" + model.asset.version + "' is not supported (this loader reads glTF 2.0)");
+        throw scene_error(name, "asset.version",
+                          "glTF " + shown(model.asset.version) + " is not supported (this loader reads glTF 2.0)");
     scene::mark const mark = s.make_mark();
     try {
         return converter(model, file, s, r).run(parent);
@@ -725,6 +968,30 @@ node_id load_gltf(scene& s, fs::path const& file, node_id parent, registry const
         s.roll_back(mark);
         throw;
     }
+}
+
+} // namespace
+
+node_id parse_gltf(std::string_view bytes, fs::path const& file, scene& s, node_id parent, registry const& r) {
+    try {
+        return parse(bytes, file, s, parent, r);
+    } catch (std::bad_alloc const&) {
+        throw scene_error(file.string(), "", "out of memory while loading");
+    }
+}
+
+node_id load_gltf(scene& s, fs::path const& file, node_id parent, registry const& r) {
+    std::string bytes;
+    try {
+        std::uint64_t const size = require_regular_file(file);
+        bytes.resize(std::size_t(size));
+        std::ifstream in(file, std::ios::binary);
+        in.read(bytes.data(), std::streamsize(size));
+        if (!in || std::uint64_t(in.gcount()) != size) throw scene_error(file.string(), "", "cannot be read");
+    } catch (std::bad_alloc const&) {
+        throw scene_error(file.string(), "", "out of memory while reading the file");
+    }
+    return parse_gltf(bytes, file, s, parent, r);
 }
 
 void register_gltf_plugin(registry& r) {

@@ -1,0 +1,31 @@
+// The glTF 2.0 schema check of canopy.plugins.gltf (internal to the plugin): the JSON document is
+// checked, every property of the core specification with its JSON type, range, and references
+// between elements, before tinygltf reads it (tinygltf drops a property of the wrong type, or an
+// index of -1, without a word).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace canopy::gltf_schema {
+
+// The uris the document gives its buffers and images ("" where it gives none), as written.
+struct document_uris {
+    std::vector<std::string> buffers, images;
+};
+
+// Throws canopy::scene_error(file, JSON path, problem), as
+//   "model.gltf: materials[0].pbrMetallicRoughness: expected an object, got an array"
+// for malformed JSON, JSON nested deeper than max_depth (or the loader's own ceiling), and any
+// property of the wrong type, out of its range, or referring to an element that does not exist;
+// accessors, sparse accessors and buffer views must lie inside their buffer views and buffers
+// (by their declared byteLength).
+document_uris check_document(std::string_view json, std::string const& file, std::uint64_t max_depth);
+
+// The deepest nesting of JSON arrays and objects allowed in a glTF file, whatever max_depth says:
+// tinygltf copies extras and extensions recursively.
+inline constexpr std::uint64_t nesting_ceiling = 512;
+
+} // namespace canopy::gltf_schema
