@@ -227,10 +227,9 @@ struct file_checker {
         return *v;
     }
 
-    // --- OFF. ASCII: header, counts, every vertex and face line; `clean` receives the text as
-    // OpenMesh is given it (comments and blank lines removed, since its reader takes none; one
-    // record per line; a face line without colours cut after its last index, since OpenMesh
-    // would read what follows as the next face). Binary: see check_off_binary.
+    // --- OFF. ASCII: header, counts, every vertex and face line; `clean` receives the checked
+    // text for import_off_text (comments and blank lines removed, one record per line, a face line
+    // without colours cut after its last index). Binary: see check_off_binary.
     std::optional<std::size_t> check_off(std::string& clean) const {
         // OpenMesh decides between text and binary from the file's first line alone.
         std::string_view const first = data.substr(0, data.find('\n'));
@@ -972,6 +971,39 @@ checked_input check_input(std::string_view data, std::string const& file, std::s
     return out;
 }
 
+// ASCII OFF, checked and cleaned by check_off, into OpenMesh's importer as OpenMesh's OFF reader
+// would put it: the reader itself cannot be given it, since it takes the header's [ST][C][N]
+// flags from the last file it was asked about by name (a stream read keeps another file's).
+bool import_off_text(std::string_view clean, recording_importer& importer) {
+    line_reader lines(clean, '\0');
+    std::vector<std::string_view> t;
+    lines.next(t);
+    off_header const h = *parse_off_header(t[0]);
+    lines.next(t);
+    std::size_t const vertices = std::size_t(*read_integer(t[0])), faces = std::size_t(*read_integer(t[1]));
+    auto const number = [](std::string_view token) { return *read_float(token).value; };
+    std::size_t const values = h.normals ? 6 : 3;
+    std::vector<OpenMesh::VertexHandle> corners;
+    for (std::size_t v = 0; v < vertices; ++v) {
+        lines.next(t);
+        OpenMesh::VertexHandle const vh = importer.add_vertex(OpenMesh::Vec3f(number(t[0]), number(t[1]), number(t[2])));
+        if (h.normals) importer.set_normal(vh, OpenMesh::Vec3f(number(t[3]), number(t[4]), number(t[5])));
+        if (h.texcoords) {
+            // After the colour (COFF: the last two values), else right after the position.
+            std::size_t const at = h.colours ? t.size() - 2 : values;
+            importer.set_texcoord(vh, OpenMesh::Vec2f(number(t[at]), number(t[at + 1])));
+        }
+    }
+    for (std::size_t f = 0; f < faces; ++f) {
+        lines.next(t);
+        std::size_t const n = std::size_t(*read_integer(t[0]));
+        corners.clear();
+        for (std::size_t k = 1; k <= n; ++k) corners.push_back(OpenMesh::VertexHandle(int(*read_integer(t[k]))));
+        importer.add_face(corners);
+    }
+    return true;
+}
+
 openmesh_read_result read_checked(std::filesystem::path const& path) {
     std::string const file = path.string();
     std::string const ext = extension_of(path);
@@ -985,7 +1017,7 @@ openmesh_read_result read_checked(std::filesystem::path const& path) {
         in.read(data.data(), std::streamsize(size));
         if (std::uint64_t(in.gcount()) != size) throw scene_error(file, "", "cannot be read (it changed while being read?)");
         checked = check_input(data, file, ext);
-    } // checked: OpenMesh reads the file (or clean_off) itself
+    } // checked: OpenMesh reads the file itself (ASCII OFF: clean_off, through import_off_text)
     std::optional<std::size_t> declared = checked.faces;
     std::string const& clean_off = checked.clean_off;
 
@@ -1001,12 +1033,8 @@ openmesh_read_result read_checked(std::filesystem::path const& path) {
         std::lock_guard const lock(openmesh_mutex());
         captured_omerr capture;
         bool ok = false;
-        if (clean_off.empty()) {
-            ok = OpenMesh::IO::IOManager().read(file, importer, options);
-        } else {
-            std::istringstream text(clean_off);
-            ok = OpenMesh::IO::IOManager().read(text, "off", importer, options);
-        }
+        if (clean_off.empty()) ok = OpenMesh::IO::IOManager().read(file, importer, options);
+        else ok = import_off_text(clean_off, importer);
         messages = capture.messages();
         if (!ok)
             throw scene_error(file, "", "OpenMesh cannot read it" + (messages.empty() ? std::string() : ": " + messages));

@@ -40,8 +40,9 @@
 // that fits a float (else "overflows a float"), every integer an integer in range; and:
 //   OFF (ASCII)   header [ST][C][N]OFF, counts, every vertex line (coordinates, normals, STOFF's
 //                 texture coordinates after COFF's colour), every face (corner count, indices in
-//                 range, truncation); comments and blank lines are removed, and a face line
-//                 without colours is cut after its last index, before OpenMesh reads the text
+//                 range, truncation); the checked text is then handed to OpenMesh's importer here,
+//                 as OpenMesh's OFF reader would (that reader takes no comments, and reading from
+//                 memory it would keep the [ST][C][N] flags of the last OFF file it opened)
 //   OFF BINARY    counts against the bytes that follow, every vertex's floats finite, every
 //                 face's corner count and indices
 //   PLY           the header as OpenMesh parses it (format on line 2, element counts below 2^32,
