@@ -257,7 +257,8 @@ private:
     std::int64_t integer_at(json const& v, std::string const& path, std::int64_t low, std::int64_t high) const {
         if (!v.is_number_integer()) wrong_type(path, "an integer", v);
         bool const above = v.is_number_unsigned() ? v.get<std::uint64_t>() > std::uint64_t(high) : v.get<std::int64_t>() > high;
-        bool const below = !v.is_number_unsigned() && v.get<std::int64_t>() < low;
+        bool const below = v.is_number_unsigned() ? low > 0 && v.get<std::uint64_t>() < std::uint64_t(low)
+                                                  : v.get<std::int64_t>() < low;
         if (above || below)
             fail(path, integer_text(v) + " is out of range [" + std::to_string(low) + ", " + std::to_string(high) + "]");
         return v.get<std::int64_t>();

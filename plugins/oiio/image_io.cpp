@@ -1,6 +1,7 @@
 // Implementation of canopy.image_io on OpenImageIO 2.4.
 module;
 #include <algorithm>
+#include <cctype>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -47,10 +48,13 @@ void read_image_into(std::filesystem::path const& path, image_read_limits const&
     } catch (scene_error const& e) {
         fail(path, e.problem());
     }
-    // The reader of the file's extension only: OpenImageIO's fallback tries every format it knows
-    // on a file its extension's reader refuses.
-    auto in = OIIO::ImageInput::create(path.string(), false);
-    if (!in) fail(path, "no image reader for this file type: " + reason(OIIO::geterror()));
+    // The reader of the file's extension only: given a file name, OpenImageIO tries every format
+    // it knows on a file its extension's reader refuses; given the extension, it makes that reader.
+    std::string extension = path.extension().string();
+    if (!extension.empty()) extension.erase(0, 1);
+    for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
+    auto in = extension.empty() ? nullptr : OIIO::ImageInput::create(extension, false);
+    if (!in) fail(path, "no image reader for this file type (" + (extension.empty() ? std::string("no extension") : "'." + extension + "'") + ")");
     OIIO::ImageSpec spec;
     if (!in->open(path.string(), spec)) fail(path, "cannot read image: " + reason(in->geterror()));
 
