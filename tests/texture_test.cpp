@@ -532,6 +532,46 @@ TEST_CASE("an image whose header claims more than --max-texels texels is refused
                Catch::Contains("two.png: is ") && Catch::Contains("bytes, over the limit of 20 bytes per file (--max-file-bytes)"));
 }
 
+TEST_CASE("GIF, WebP and BMP headers are checked before OpenImageIO opens them (it decodes them as it opens)") {
+    temp_folder const tmp("canopy_texture_test");
+    auto const u16 = [](std::string& out, std::uint32_t v) { out += char(v & 0xFF), out += char(v >> 8 & 0xFF); };
+    auto const u32 = [&](std::string& out, std::uint32_t v) { u16(out, v & 0xFFFF), u16(out, v >> 16); };
+    // GIF: a 1 × 1 image on a 65535 × 65535 canvas (OpenImageIO fills the canvas: 16 GiB).
+    auto const gif = [&](std::uint32_t w, std::uint32_t h) {
+        std::string g = "GIF89a";
+        u16(g, w), u16(g, h);
+        g += std::string("\x80\x00\x00\x00\x00\x00\xff\xff\xff\x2c\x00\x00\x00\x00\x01\x00\x01\x00\x00\x02\x02\x44\x01\x00\x3b", 25);
+        return g;
+    };
+    tmp.write("big.gif", gif(65535, 65535));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.gif"); }),
+               Catch::Contains("big.gif: image is 65535 × 65535 (4294836225 texels), over the limit of 67108864 texels (--max-texels)"));
+    tmp.write("small.gif", gif(1, 1));
+    auto const small = canopy::read_texture_image(tmp.path / "small.gif");
+    CHECK(small.width == 1);
+    CHECK(small.height == 1);
+    // BMP, run-length encoded, 20000 × 20000 (OpenImageIO decodes it whole as it opens it).
+    std::string bmp = "BM";
+    u32(bmp, 66), u32(bmp, 0), u32(bmp, 62);
+    u32(bmp, 40), u32(bmp, 20000), u32(bmp, 20000);
+    u16(bmp, 1), u16(bmp, 8), u32(bmp, 1), u32(bmp, 4), u32(bmp, 2835), u32(bmp, 2835), u32(bmp, 2), u32(bmp, 0);
+    bmp += std::string("\x00\x00\x00\x00\xff\xff\xff\x00\x00\x01\x00\x00", 12);
+    tmp.write("big.bmp", bmp);
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.bmp"); }),
+               Catch::Contains("big.bmp: image is 20000 × 20000 (400000000 texels), over the limit"));
+    // WebP, lossless, 16383 × 16383.
+    std::string webp = "RIFF";
+    u32(webp, 4 + 8 + 69);
+    webp += "WEBPVP8L";
+    u32(webp, 69);
+    webp += '\x2f';
+    u32(webp, 16382u | 16382u << 14 | 1u << 28);
+    webp += std::string(64, '\0');
+    tmp.write("big.webp", webp);
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.webp"); }),
+               Catch::Contains("big.webp: image is 16383 × 16383 (268402689 texels), over the limit"));
+}
+
 TEST_CASE("a texture that is a device, a folder or not what its extension says is refused by name") {
     temp_folder const tmp("canopy_texture_test");
     fs::create_symlink("/dev/zero", tmp.path / "zero.png");

@@ -3,12 +3,16 @@ module;
 #include <algorithm>
 #include <cctype>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <memory>
 #include <new>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 #include <OpenImageIO/imageio.h>
 module canopy.image_io;
@@ -35,6 +39,45 @@ std::string size_text(std::int64_t width, std::int64_t height) {
     return std::to_string(width) + " × " + std::to_string(height);
 }
 
+// Width and height from the header of a GIF, WebP or BMP file: OpenImageIO's readers of these
+// formats allocate (and fill) the whole image when they open the file (GIF: its canvas; WebP:
+// the decoded image; BMP: an RLE image), before its size can be checked. nullopt for other
+// formats and for headers not understood here (OpenImageIO then reports them).
+std::optional<std::pair<std::uint64_t, std::uint64_t>> size_before_open(std::filesystem::path const& path,
+                                                                        std::string const& extension) {
+    if (extension != "gif" && extension != "webp" && extension != "bmp") return std::nullopt;
+    unsigned char b[32] = {};
+    std::ifstream in(path, std::ios::binary);
+    in.read(reinterpret_cast<char*>(b), sizeof b);
+    std::size_t const n = std::size_t(in.gcount());
+    auto const le16 = [&](std::size_t i) { return std::uint64_t(b[i]) | std::uint64_t(b[i + 1]) << 8; };
+    auto const le24 = [&](std::size_t i) { return le16(i) | std::uint64_t(b[i + 2]) << 16; };
+    auto const le32 = [&](std::size_t i) { return le16(i) | le16(i + 2) << 16; };
+    if (n >= 10 && std::memcmp(b, "GIF8", 4) == 0) return std::pair(le16(6), le16(8));
+    if (n >= 26 && b[0] == 'B' && b[1] == 'M') {
+        if (le32(14) == 12) return std::pair(le16(18), le16(20));
+        auto const magnitude = [](std::uint64_t v) { return v >= 0x80000000u ? 0x100000000u - v : v; };
+        return std::pair(magnitude(le32(18)), magnitude(le32(22)));
+    }
+    if (n >= 30 && std::memcmp(b, "RIFF", 4) == 0 && std::memcmp(b + 8, "WEBP", 4) == 0) {
+        if (std::memcmp(b + 12, "VP8X", 4) == 0) return std::pair(le24(24) + 1, le24(27) + 1);
+        if (std::memcmp(b + 12, "VP8L", 4) == 0 && b[20] == 0x2f) {
+            std::uint64_t const bits = le32(21);
+            return std::pair((bits & 0x3fff) + 1, (bits >> 14 & 0x3fff) + 1);
+        }
+        if (std::memcmp(b + 12, "VP8 ", 4) == 0) return std::pair(le16(26) & 0x3fff, le16(28) & 0x3fff);
+    }
+    return std::nullopt;
+}
+
+void check_texels(std::filesystem::path const& path, std::uint64_t width, std::uint64_t height,
+                  image_read_limits const& limits) {
+    std::uint64_t const texels = width * height;
+    if (texels > limits.max_texels)
+        fail(path, "image is " + size_text(std::int64_t(width), std::int64_t(height)) + " (" + std::to_string(texels) +
+                       " texels), over the limit of " + std::to_string(limits.max_texels) + " texels (--max-texels)");
+}
+
 } // namespace
 
 image_read_limits default_image_read_limits() {
@@ -53,6 +96,7 @@ void read_image_into(std::filesystem::path const& path, image_read_limits const&
     std::string extension = path.extension().string();
     if (!extension.empty()) extension.erase(0, 1);
     for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (auto const size = size_before_open(path, extension)) check_texels(path, size->first, size->second, limits);
     auto in = extension.empty() ? nullptr : OIIO::ImageInput::create(extension, false);
     if (!in) fail(path, "no image reader for this file type (" + (extension.empty() ? std::string("no extension") : "'." + extension + "'") + ")");
     OIIO::ImageSpec spec;
@@ -64,9 +108,7 @@ void read_image_into(std::filesystem::path const& path, image_read_limits const&
     if (spec.width <= 0 || spec.height <= 0) fail(path, "image has no pixels (" + size_text(spec.width, spec.height) + ")");
     if (spec.nchannels <= 0) fail(path, "image has no channels");
     std::uint64_t const texels = std::uint64_t(spec.width) * std::uint64_t(spec.height);
-    if (texels > limits.max_texels)
-        fail(path, "image is " + size_text(spec.width, spec.height) + " (" + std::to_string(texels) +
-                       " texels), over the limit of " + std::to_string(limits.max_texels) + " texels (--max-texels)");
+    check_texels(path, std::uint64_t(spec.width), std::uint64_t(spec.height), limits);
     if (texels > std::numeric_limits<std::size_t>::max() / (4 * sizeof(float)))
         fail(path, "image is " + size_text(spec.width, spec.height) + ", too large to address");
 

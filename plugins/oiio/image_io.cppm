@@ -13,7 +13,8 @@
 // extension (a file that is not what its extension says is refused, not tried with every
 // format OpenImageIO knows), and only after its header: an image of more than max_texels texels
 // (width × height; --max-texels, canopy::default_limits() by default) is refused before any pixel
-// is decoded, as are images without pixels or channels, volumes and deep images.
+// is decoded (GIF, WebP and BMP headers are read here, since OpenImageIO decodes those images as
+// it opens them), as are images without pixels or channels, volumes and deep images.
 //
 // Failures throw image_error naming the file and the problem (missing file, unknown format,
 // truncated data, a limit), as "tree.png: image is 16384 × 16384 (268435456 texels), over the
