@@ -541,7 +541,14 @@ TEST_CASE("bad glTF files give errors naming the file and the element") {
                    b.document("{\"uri\": \"absent.bin\", \"byteLength\": 36}",
                               "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
                               "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
-        expect(dir.path / "nobin.gltf", {"absent.bin"});
+        expect(dir.path / "nobin.gltf", {"nobin.gltf: buffers[0]: " + (dir.path / "absent.bin").string() + ": file not found (buffer)"});
+        b.external_buffer(dir.path / "short.bin");
+        write_text(dir.path / "short.gltf",
+                   b.document("{\"uri\": \"short.bin\", \"byteLength\": 40}",
+                              "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
+                              "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+        expect(dir.path / "short.gltf", {"short.gltf: buffers[0]: " + (dir.path / "short.bin").string() +
+                                         ": has 36 bytes, its byteLength says 40"});
     }
     SECTION("accessor reaching past its buffer view") {
         small_file f;

@@ -936,6 +936,21 @@ node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id pa
     for (auto const& uri : uris.images)
         if (!uri.empty() && !uri.starts_with("data:")) access.image_paths.insert(tinygltf_path(access.base_dir, uri));
     for (auto const& b : access.buffer_paths) access.image_paths.erase(b);
+    // External buffers: there, regular files within the size limit, of their declared length.
+    for (std::size_t i = 0; i < access.buffer_paths.size(); ++i) {
+        std::string const& path = access.buffer_paths[i];
+        if (path.empty()) continue;
+        std::string const where = "buffers[" + std::to_string(i) + "]";
+        std::uint64_t size = 0;
+        try {
+            size = require_regular_file(path, default_limits().max_file_bytes, "buffer");
+        } catch (scene_error const& e) {
+            throw scene_error(name, where, e.what());
+        }
+        if (size != uris.buffer_lengths[i])
+            throw scene_error(name, where, path + ": has " + std::to_string(size) + " bytes, its byteLength says " +
+                                               std::to_string(uris.buffer_lengths[i]));
+    }
 
     tinygltf::Model model;
     std::string err, warn;

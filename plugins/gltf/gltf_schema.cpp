@@ -139,6 +139,7 @@ public:
         each("buffers", [&](json const& o, std::string const& path) {
             uris.buffers.push_back(string(o, path, "uri").value_or(""));
             buffer_lengths_.push_back(std::uint64_t(*integer(o, path, "byteLength", 1, exact_max, true)));
+            uris.buffer_lengths.push_back(buffer_lengths_.back());
             common(o, path);
         });
         each("bufferViews", [&](json const& o, std::string const& path) {

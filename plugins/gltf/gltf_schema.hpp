@@ -11,9 +11,11 @@
 
 namespace canopy::gltf_schema {
 
-// The uris the document gives its buffers and images ("" where it gives none), as written.
+// The uris the document gives its buffers and images ("" where it gives none), as written, and
+// the buffers' declared lengths.
 struct document_uris {
     std::vector<std::string> buffers, images;
+    std::vector<std::uint64_t> buffer_lengths; // each buffer's byteLength
 };
 
 // Throws canopy::scene_error(file, JSON path, problem), as
