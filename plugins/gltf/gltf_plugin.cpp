@@ -285,7 +285,12 @@ public:
         for (auto const& ext : model_.extensionsRequired)
             fail("extensionsRequired", "the file requires extension " + shown(ext) + ", which this loader does not support");
 
-        check_hierarchy();
+        // The schema check has made the nodes disjoint trees (one parent each, no cycle) no
+        // deeper than max_depth, and each scene's nodes roots.
+        std::vector<bool> is_child(model_.nodes.size(), false);
+        for (auto const& n : model_.nodes)
+            for (int c : n.children)
+                if (c >= 0 && std::size_t(c) < is_child.size()) is_child[std::size_t(c)] = true;
         std::vector<int> roots;
         std::string roots_where;
         if (!model_.scenes.empty()) {
@@ -295,14 +300,10 @@ public:
                                   std::to_string(model_.scenes.size()) + " scenes)");
             roots = model_.scenes[std::size_t(chosen)].nodes;
             roots_where = index_name("scenes", chosen) + ".nodes";
-            for (int n : roots)
-                if (n >= 0 && std::size_t(n) < parents_.size() && parents_[std::size_t(n)] >= 0)
-                    fail(roots_where, index_name("nodes", n) + " is a child of " + index_name("nodes", parents_[std::size_t(n)]) +
-                                          ", not a root node");
         } else {
             // No scene: every node that is no node's child.
             for (std::size_t n = 0; n < model_.nodes.size(); ++n)
-                if (parents_[n] < 0) roots.push_back(int(n));
+                if (!is_child[n]) roots.push_back(int(n));
             roots_where = "nodes";
         }
 
@@ -354,56 +355,6 @@ private:
     }
 
     // ---- Nodes ----------------------------------------------------------------------------------
-
-    // The node hierarchy, before anything is added to the scene: the nodes must form disjoint
-    // trees (glTF 2.0, §3.5.3): at most one parent each, no node its own descendant; and no node
-    // deeper than max_depth. Walks parents with explicit lists (no recursion); fills parents_.
-    void check_hierarchy() {
-        std::size_t const count = model_.nodes.size();
-        parents_.assign(count, -1);
-        for (std::size_t p = 0; p < count; ++p)
-            for (int c : model_.nodes[p].children) {
-                if (c < 0 || std::size_t(c) >= count)
-                    fail(index_name("nodes", p) + ".children", "node " + std::to_string(c) + " does not exist (" +
-                                                                  std::to_string(count) + " nodes)");
-                int& parent = parents_[std::size_t(c)];
-                if (parent >= 0)
-                    fail(index_name("nodes", c), "is a child of both " + index_name("nodes", parent) + " and " +
-                                                     index_name("nodes", p) + " (a glTF node has at most one parent)");
-                parent = int(p);
-            }
-        std::uint64_t const max_depth = default_limits().max_depth;
-        std::vector<std::uint64_t> depth(count, 0); // 0: not known yet
-        std::vector<char> on_path(count, 0);
-        std::vector<std::size_t> path;              // from a node up towards its root
-        for (std::size_t start = 0; start < count; ++start) {
-            path.clear();
-            std::size_t k = start;
-            while (depth[k] == 0 && !on_path[k] && parents_[k] >= 0) {
-                on_path[k] = 1;
-                path.push_back(k);
-                k = std::size_t(parents_[k]);
-            }
-            if (on_path[k]) {
-                // k is its own ancestor: the cycle is path's part from k on, read downwards.
-                auto const from = std::find(path.begin(), path.end(), k);
-                std::string cycle = index_name("nodes", k);
-                std::size_t shown = 0;
-                for (auto it = path.end(); it != from && shown < 8; ++shown) cycle += " → " + index_name("nodes", *--it);
-                if (std::size_t(path.end() - from) > 8) cycle += " → …";
-                fail(index_name("nodes", k), "is its own descendant (" + cycle + ")");
-            }
-            if (depth[k] == 0) depth[k] = 1; // a root
-            for (auto it = path.rbegin(); it != path.rend(); ++it) {
-                depth[*it] = depth[std::size_t(parents_[*it])] + 1;
-                on_path[*it] = 0;
-                if (depth[*it] > max_depth)
-                    fail(index_name("nodes", *it), "is " + std::to_string(depth[*it]) +
-                                                       " levels deep in the node hierarchy, over the limit of " +
-                                                       std::to_string(max_depth) + " (--max-depth)");
-            }
-        }
-    }
 
     affine_transform<float> transform_of(tinygltf::Node const& n, std::string const& where) const {
         affine_transform<double> xf = affine_transform<double>::identity();
@@ -886,7 +837,6 @@ private:
     std::string name_;
     scene& s_;
     registry const& r_;
-    std::vector<int> parents_; // each node's parent, -1 for none (check_hierarchy)
     std::vector<std::optional<int>> materials_;
     std::vector<std::optional<std::vector<std::uint32_t>>> meshes_;
     std::map<std::pair<int, double>, int> images_;

@@ -109,7 +109,8 @@ bool fits(std::uint64_t offset, std::uint64_t count, std::uint64_t element, std:
 
 class checker {
 public:
-    checker(json const& root, std::string const& file) : root_(root), file_(file) {}
+    checker(json const& root, std::string const& file, std::uint64_t max_depth)
+        : root_(root), file_(file), max_depth_(max_depth) {}
 
     document_uris uris;
 
@@ -205,11 +206,13 @@ public:
             common(o, path);
         });
         each("animations", [&](json const& o, std::string const& path) { animation(o, path); });
+        hierarchy();
     }
 
 private:
     json const& root_;
     std::string const& file_;
+    std::uint64_t max_depth_;
     std::map<std::string, std::size_t, std::less<>> sizes_;
     std::vector<std::uint64_t> buffer_lengths_;
     struct view {
@@ -534,6 +537,63 @@ private:
         common(o, path);
     }
 
+    // The node hierarchy: the nodes must form disjoint trees (glTF 2.0, §3.5.3: at most one
+    // parent each, no node its own descendant), each scene's nodes must be roots, and no node may
+    // lie deeper than max_depth. Parents are walked with explicit lists, without recursion.
+    void hierarchy() const {
+        json const* nodes = member(root_, "", "nodes", false);
+        std::size_t const count = nodes ? nodes->size() : 0;
+        std::vector<std::int64_t> parent(count, -1);
+        for (std::size_t p = 0; p < count; ++p) {
+            json const* children = member((*nodes)[p], "", "children", false);
+            if (!children) continue;
+            for (auto const& child : *children) {
+                std::size_t const c = child.get<std::size_t>();
+                if (parent[c] >= 0)
+                    fail(item("nodes", c), "is a child of both " + item("nodes", std::size_t(parent[c])) + " and " +
+                                               item("nodes", p) + " (a glTF node has at most one parent)");
+                parent[c] = std::int64_t(p);
+            }
+        }
+        std::vector<std::uint64_t> depth(count, 0); // 0: not known yet
+        std::vector<char> on_path(count, 0);
+        std::vector<std::size_t> path;              // from a node up towards its root
+        for (std::size_t start = 0; start < count; ++start) {
+            path.clear();
+            std::size_t k = start;
+            while (depth[k] == 0 && !on_path[k] && parent[k] >= 0) {
+                on_path[k] = 1;
+                path.push_back(k);
+                k = std::size_t(parent[k]);
+            }
+            if (on_path[k]) {
+                // k is its own ancestor: the cycle is path's part from k on, read downwards.
+                auto const from = std::find(path.begin(), path.end(), k);
+                std::string cycle = item("nodes", k);
+                std::size_t listed = 0;
+                for (auto it = path.end(); it != from && listed < 8; ++listed) cycle += " → " + item("nodes", *--it);
+                if (std::size_t(path.end() - from) > 8) cycle += " → …";
+                fail(item("nodes", k), "is its own descendant (" + cycle + ")");
+            }
+            if (depth[k] == 0) depth[k] = 1; // a root
+            for (auto it = path.rbegin(); it != path.rend(); ++it) {
+                depth[*it] = depth[std::size_t(parent[*it])] + 1;
+                on_path[*it] = 0;
+                if (depth[*it] > max_depth_)
+                    fail(item("nodes", *it), "is " + std::to_string(depth[*it]) +
+                                                 " levels deep in the node hierarchy, over the limit of " +
+                                                 std::to_string(max_depth_) + " (--max-depth)");
+            }
+        }
+        each("scenes", [&](json const& o, std::string const& path) {
+            if (json const* roots = member(o, path, "nodes", false))
+                for (auto const& r : *roots)
+                    if (std::size_t const n = r.get<std::size_t>(); parent[n] >= 0)
+                        fail(join(path, "nodes"), item("nodes", n) + " is a child of " +
+                                                      item("nodes", std::size_t(parent[n])) + ", not a root node");
+        });
+    }
+
     void animation(json const& o, std::string const& path) const {
         json const& samplers = *array(o, path, "samplers", 1, true);
         std::string const sp = join(path, "samplers");
@@ -598,7 +658,7 @@ document_uris check_document(std::string_view text, std::string const& file, std
         if (message.size() > longest) message = message.substr(0, longest) + "…";
         throw scene_error(file, "", "malformed JSON: " + message);
     }
-    checker c(root, file);
+    checker c(root, file, max_depth);
     c.run();
     return std::move(c.uris);
 }

@@ -23,7 +23,8 @@ struct document_uris {
 // for malformed JSON, JSON nested deeper than max_depth (or the loader's own ceiling), and any
 // property of the wrong type, out of its range, or referring to an element that does not exist;
 // accessors, sparse accessors and buffer views must lie inside their buffer views and buffers
-// (by their declared byteLength).
+// (by their declared byteLength); the nodes must form disjoint trees (one parent each, no
+// cycle, each scene's nodes roots) no deeper than max_depth.
 document_uris check_document(std::string_view json, std::string const& file, std::uint64_t max_depth);
 
 // The deepest nesting of JSON arrays and objects allowed in a glTF file, whatever max_depth says:
