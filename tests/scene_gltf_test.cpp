@@ -977,3 +977,51 @@ TEST_CASE("glTF buffers and images that are devices, huge or not images are refu
     write_text(dir.path / "cut.glb", bytes);
     CHECK_THAT(load_error(dir.path / "cut.glb"), Catch::Contains("cut.glb: not a valid .glb file: its BIN chunk of"));
 }
+
+TEST_CASE("glTF images of the same bytes or file are decoded once, and alpha factors move the cutoff, not the texels") {
+    temp_folder const dir("canopy_gltf_test");
+    write_mask_png(dir.path / "mask.png");
+    auto const png = read_bytes(dir.path / "mask.png");
+    gltf_builder b;
+    int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
+    int const uv = b.vec2s({0, 1, 1, 1, 1, 0});
+    int const view = b.add_view(png.data(), png.size());
+    b.views.push_back(b.views[std::size_t(view)]); // a second view of the same bytes
+    std::string primitives;
+    for (int m = 0; m < 5; ++m)
+        primitives += std::string(m ? ", " : "") + "{\"attributes\": {\"POSITION\": " + std::to_string(pos) +
+                      ", \"TEXCOORD_0\": " + std::to_string(uv) + "}, \"material\": " + std::to_string(m) + "}";
+    auto const material = [](int texture, double alpha) {
+        return "{\"alphaMode\": \"MASK\", \"alphaCutoff\": 0.5, \"pbrMetallicRoughness\": {\"baseColorFactor\": [1, 1, 1, " +
+               std::to_string(alpha) + "], \"baseColorTexture\": {\"index\": " + std::to_string(texture) + "}}}";
+    };
+    std::string const rest =
+        "\"meshes\": [{\"primitives\": [" + primitives + "]}], \"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}], "
+        "\"materials\": [" + material(0, 1.0) + ", " + material(1, 0.5) + ", " + material(2, 0.25) + ", " + material(3, 1.0) +
+        ", " + material(4, 0.8) + "], \"textures\": [{\"source\": 0}, {\"source\": 1}, {\"source\": 2}, {\"source\": 3}, {\"source\": 4}], "
+        "\"images\": [{\"bufferView\": " + std::to_string(view) + ", \"mimeType\": \"image/png\"}, {\"bufferView\": " +
+        std::to_string(view + 1) + ", \"mimeType\": \"image/png\"}, {\"bufferView\": " + std::to_string(view) +
+        ", \"mimeType\": \"image/png\"}, {\"uri\": \"mask.png\"}, {\"uri\": \"mask.png\"}]";
+    write_glb(dir.path / "shared.glb", b.document("{\"byteLength\": " + std::to_string(b.bin.size()) + "}", rest), b.bin);
+    canopy::scene s;
+    plugins().load(s, dir.path / "shared.glb");
+    // Images 0-2 (one buffer range) are one image, 3-4 (one file) another; factor 0.25 < cutoff 0.5
+    // leaves only holes (a texel of alpha 0).
+    REQUIRE(s.materials().size() == 5);
+    REQUIRE(s.images().size() == 3);
+    auto const& m = s.materials();
+    CHECK(m[0].image == m[1].image);
+    CHECK(m[3].image == m[4].image);
+    CHECK(m[0].image != m[3].image);
+    CHECK(m[0].alpha_cutoff == 0.5f);
+    CHECK(m[1].alpha_cutoff == 1.0f);
+    CHECK(m[4].alpha_cutoff == float(0.5 / 0.8));
+    auto const& hole = s.images()[std::size_t(m[2].image)];
+    REQUIRE(hole.texels.size() == 1);
+    CHECK(hole.texels[0].w == 0.0f);
+    // The texels as stored in the file: the opaque quadrant keeps alpha 1.
+    auto const& shared = s.images()[std::size_t(m[0].image)];
+    REQUIRE(shared.width == 4);
+    CHECK(shared.texels[5].w == 1.0f);
+    CHECK(shared.texels[10].w == 0.0f);
+}

@@ -50,6 +50,9 @@ struct file_access {
     std::set<std::string> image_paths;    // images' files, as tinygltf names them
     std::optional<scene_error> refused;   // the first file or embedded image refused
     std::string refused_where;            // its element ("buffers[0]", "images[2]")
+    // Images that are another's bytes (the same buffer bytes, data: URI or file): not decoded
+    // again, but shared (image index → the first image of those bytes).
+    std::map<int, int> same_as;
 };
 
 // tinygltf's own path of a uri: dlib::urldecode ('+' is a space) joined to the base folder.
@@ -151,6 +154,7 @@ bool decode_embedded_image(tinygltf::Image* image, int index, std::string* err, 
                            int height, unsigned char const* bytes, int size, void* user) {
     if (!image->uri.empty()) return true;
     auto& access = *static_cast<file_access*>(user);
+    if (access.same_as.contains(index)) return true;
     std::string const where = "images[" + std::to_string(index) + "]";
     auto const refuse = [&](std::string const& problem) {
         if (!access.refused) access.refused = scene_error("", "", problem), access.refused_where = where;
@@ -277,8 +281,9 @@ std::string index_name(char const* array, T i) {
 // The conversion of one loaded model into a scene.
 class converter {
 public:
-    converter(tinygltf::Model const& model, fs::path const& file, scene& s, registry const& r)
-        : model_(model), file_(file), name_(file.string()), s_(s), r_(r),
+    converter(tinygltf::Model const& model, fs::path const& file, scene& s, registry const& r,
+              std::map<int, int> const& same_as)
+        : model_(model), file_(file), name_(file.string()), s_(s), r_(r), same_as_(same_as),
           materials_(model.materials.size()), meshes_(model.meshes.size()) {}
 
     node_id run(node_id parent) {
@@ -746,8 +751,16 @@ private:
                 fail(index_name("textures", texture), "has no image source this loader reads (source " +
                                                           std::to_string(source) + ", " +
                                                           std::to_string(model_.images.size()) + " images)");
-            // The factor's alpha multiplies the texture's: masks compare the product.
-            md.image = image(source, masked ? factor[3] : 1.0);
+            // The factor's alpha multiplies the texture's, and a mask compares the product with
+            // the cutoff: the texture's alpha is compared with cutoff / factor instead, so that
+            // one image serves every material; below the cutoff, a factor leaves only holes.
+            double const alpha = masked ? factor[3] : 1.0;
+            if (alpha < md.alpha_cutoff) {
+                md.image = image(-1, 0.0);
+            } else {
+                md.image = image(source, 1.0);
+                if (alpha > 0.0 && alpha < 1.0) md.alpha_cutoff = float(double(md.alpha_cutoff) / alpha);
+            }
         } else if (masked) {
             // No texture: the factor's alpha alone decides, through a 1×1 image.
             md.image = image(-1, factor[3]);
@@ -758,22 +771,29 @@ private:
     }
 
     // Scene image of glTF image `index` with alpha scaled by `alpha` (index -1: one white texel).
+    // Scene image of glTF image `index`, made once however many materials use it (and once for
+    // all glTF images of the same bytes or file); index -1: one white texel of alpha `alpha`.
     int image(int index, double alpha) {
-        auto const key = std::make_pair(index, alpha);
+        if (auto it = same_as_.find(index); it != same_as_.end()) index = it->second;
+        auto const key = std::make_pair(index, index < 0 ? alpha : 1.0);
         if (auto it = images_.find(key); it != images_.end()) return it->second;
+        std::optional<fs::path> file;
+        if (index >= 0 && !model_.images[std::size_t(index)].uri.empty()) {
+            file = file_.parent_path() / decode_uri(model_.images[std::size_t(index)].uri);
+            if (auto it = image_files_.find(*file); it != image_files_.end()) return images_[key] = it->second;
+        }
         image_data img;
         if (index < 0) {
             img.source = name_;
             img.width = img.height = 1;
-            img.texels = {vec4<float>(1.0f, 1.0f, 1.0f, 1.0f)};
+            img.texels = {vec4<float>(1.0f, 1.0f, 1.0f, float(alpha))};
         } else {
             img = decoded_image(index);
         }
-        if (alpha != 1.0)
-            for (auto& t : img.texels) t.w = float(double(t.w) * alpha);
         std::string const where = index < 0 ? std::string("materials") : index_name("images", index);
         int const id = guarded(where, [&] { return s_.add_image(std::move(img)); });
         images_.emplace(key, id);
+        if (file) image_files_.emplace(*file, id);
         return id;
     }
 
@@ -837,9 +857,11 @@ private:
     std::string name_;
     scene& s_;
     registry const& r_;
+    std::map<int, int> const& same_as_;
     std::vector<std::optional<int>> materials_;
     std::vector<std::optional<std::vector<std::uint32_t>>> meshes_;
     std::map<std::pair<int, double>, int> images_;
+    std::map<fs::path, int> image_files_;
 };
 
 // The JSON chunk of a .glb file, after checking its layout (glTF 2.0, §4.4: a 12-byte header,
@@ -886,6 +908,16 @@ node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id pa
     for (auto const& uri : uris.images)
         if (!uri.empty() && !uri.starts_with("data:")) access.image_paths.insert(tinygltf_path(access.base_dir, uri));
     for (auto const& b : access.buffer_paths) access.image_paths.erase(b);
+    {
+        // Images of the same bytes: decoded and held once.
+        std::map<std::array<std::int64_t, 3>, int> by_bytes;
+        std::map<std::string_view, int> by_uri;
+        for (std::size_t i = 0; i < uris.images.size(); ++i) {
+            int const first = uris.images[i].empty() ? by_bytes.try_emplace(uris.image_bytes[i], int(i)).first->second
+                                                     : by_uri.try_emplace(uris.images[i], int(i)).first->second;
+            if (first != int(i)) access.same_as[int(i)] = first;
+        }
+    }
     // External buffers: there, regular files within the size limit, of their declared length.
     for (std::size_t i = 0; i < access.buffer_paths.size(); ++i) {
         std::string const& path = access.buffer_paths[i];
@@ -928,7 +960,7 @@ node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id pa
                           "glTF " + shown(model.asset.version) + " is not supported (this loader reads glTF 2.0)");
     scene::mark const mark = s.make_mark();
     try {
-        return converter(model, file, s, r).run(parent);
+        return converter(model, file, s, r, access.same_as).run(parent);
     } catch (...) {
         s.roll_back(mark);
         throw;

@@ -22,6 +22,9 @@
 //               alphaMode MASK (alphaCutoff, default 0.5) → alpha_mode::mask; BLEND is treated
 //               as MASK with cutoff 0.5 (ray queries see a surface or a hole, never a fraction);
 //               a masked material without a texture masks by its factor's alpha (a 1×1 image).
+//               A mask compares texture alpha × factor alpha with the cutoff, that is texture
+//               alpha with cutoff / factor: each image is decoded and held once, however many
+//               materials use it (and once for all glTF images of the same bytes or file).
 //   cameras     perspective: eye at the node's origin, looking down the node's −Z, up +Y,
 //               fovy = yfov (aspect ratio and clip planes are not used)
 // Ignored: skins and morph targets (the meshes are loaded in their base pose), animations,

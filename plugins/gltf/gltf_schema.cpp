@@ -153,7 +153,7 @@ public:
             if (!fits(offset, 1, length, length, buffer_lengths_[buffer]))
                 fail(path, "bytes " + std::to_string(offset) + " + " + std::to_string(length) + " lie outside " +
                                item("buffers", buffer) + " (" + std::to_string(buffer_lengths_[buffer]) + " bytes)");
-            views_.push_back({length, std::uint64_t(stride.value_or(0))});
+            views_.push_back({buffer, offset, length, std::uint64_t(stride.value_or(0))});
             common(o, path);
         });
         each("accessors", [&](json const& o, std::string const& path) { accessor(o, path); });
@@ -162,7 +162,14 @@ public:
             uris.images.push_back(uri_value.value_or(""));
             bool const uri = uri_value.has_value();
             string(o, path, "mimeType");
-            bool const view = index(o, path, "bufferView", "bufferViews").has_value();
+            auto const view_index = index(o, path, "bufferView", "bufferViews");
+            bool const view = view_index.has_value();
+            if (view) {
+                auto const& v = views_[*view_index];
+                uris.image_bytes.push_back({std::int64_t(v.buffer), std::int64_t(v.offset), std::int64_t(v.length)});
+            } else {
+                uris.image_bytes.push_back({-1, -1, -1});
+            }
             if (uri == view) fail(path, uri ? "has both a uri and a bufferView" : "has neither a uri nor a bufferView");
             if (view && !o.contains("mimeType")) fail(join(path, "mimeType"), "is missing (required with a bufferView)");
             common(o, path);
@@ -216,7 +223,7 @@ private:
     std::map<std::string, std::size_t, std::less<>> sizes_;
     std::vector<std::uint64_t> buffer_lengths_;
     struct view {
-        std::uint64_t length, stride; // stride 0: none given
+        std::uint64_t buffer, offset, length, stride; // stride 0: none given
     };
     std::vector<view> views_;
 

@@ -4,6 +4,7 @@
 // index of -1, without a word).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <string_view>
@@ -11,11 +12,14 @@
 
 namespace canopy::gltf_schema {
 
-// The uris the document gives its buffers and images ("" where it gives none), as written, and
-// the buffers' declared lengths.
+// Where the document's buffers and images are: the uris it gives them ("" where it gives none),
+// as written, the buffers' declared lengths and the images' buffer bytes.
 struct document_uris {
     std::vector<std::string> buffers, images;
     std::vector<std::uint64_t> buffer_lengths; // each buffer's byteLength
+    // For each image in a buffer view, the bytes it is read from: buffer, byteOffset, byteLength
+    // (all -1 for an image given by uri).
+    std::vector<std::array<std::int64_t, 3>> image_bytes;
 };
 
 // Throws canopy::scene_error(file, JSON path, problem), as
