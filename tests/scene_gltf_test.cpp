@@ -1025,3 +1025,31 @@ TEST_CASE("glTF images of the same bytes or file are decoded once, and alpha fac
     CHECK(shared.texels[5].w == 1.0f);
     CHECK(shared.texels[10].w == 0.0f);
 }
+
+TEST_CASE("glTF meshes are held to --max-triangles together, before their accessors are read") {
+    temp_folder const dir("canopy_gltf_test");
+    // Four meshes of one primitive each, all on the quad's accessors: 16 vertices, 8 triangles.
+    small_file f;
+    f.write(dir.path / "quads.gltf");
+    std::ifstream in(dir.path / "quads.gltf", std::ios::binary);
+    std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    std::string const meshes_key = "\"meshes\": [";
+    auto const start = text.find(meshes_key) + meshes_key.size();
+    auto const end = text.find("]}], \"nodes\"") + 2;
+    std::string const one = text.substr(start, end - start);
+    text.replace(start, end - start, one + ", " + one + ", " + one + ", " + one);
+    text.replace(text.find("\"nodes\": [{\"mesh\": 0}]"), 22,
+                 "\"nodes\": [{\"mesh\": 0, \"children\": [1, 2, 3]}, {\"mesh\": 1}, {\"mesh\": 2}, {\"mesh\": 3}]");
+    write_text(dir.path / "quads.gltf", text);
+    limits_guard const guard;
+    canopy::default_limits().max_triangles = 16;
+    canopy::scene s;
+    plugins().load(s, dir.path / "quads.gltf");
+    CHECK(s.meshes().size() == 4);
+    canopy::default_limits().max_triangles = 7;
+    CHECK_THAT(load_error(dir.path / "quads.gltf"),
+               Catch::Contains("quads.gltf: meshes[1].primitives[0]: 8 vertices in the scene's meshes exceed the limit of 7 (--max-triangles)"));
+    canopy::default_limits().max_triangles = 15;
+    CHECK_THAT(load_error(dir.path / "quads.gltf"),
+               Catch::Contains("quads.gltf: meshes[3].primitives[0]: 16 vertices in the scene's meshes exceed the limit of 15 (--max-triangles)"));
+}

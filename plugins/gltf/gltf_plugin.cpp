@@ -284,7 +284,12 @@ public:
     converter(tinygltf::Model const& model, fs::path const& file, scene& s, registry const& r,
               std::map<int, int> const& same_as)
         : model_(model), file_(file), name_(file.string()), s_(s), r_(r), same_as_(same_as),
-          materials_(model.materials.size()), meshes_(model.meshes.size()) {}
+          materials_(model.materials.size()), meshes_(model.meshes.size()) {
+        for (auto const& m : s.meshes()) {
+            held_vertices_ += m.positions.size();
+            held_triangles_ += m.triangles.size();
+        }
+    }
 
     node_id run(node_id parent) {
         for (auto const& ext : model_.extensionsRequired)
@@ -601,8 +606,12 @@ private:
         // Positions.
         int const position = accessor_index(p.attributes, "POSITION", where);
         if (position < 0) fail(where, "has no POSITION attribute");
+        // The scene's meshes together (those already in it, and this file's) are held to
+        // --max-triangles, vertices and triangles, before anything is read: primitives of one
+        // file may share one large accessor.
         resource_limits const& limits = default_limits();
-        check_limit(name_, where, model_.accessors[std::size_t(position)].count, limits.max_triangles, "vertices",
+        std::uint64_t const declared = model_.accessors[std::size_t(position)].count;
+        check_limit(name_, where, held_vertices_ + declared, limits.max_triangles, "vertices in the scene's meshes",
                     "--max-triangles");
         std::vector<double> const xyz = read_attribute(position, "POSITION", 3, false, std::size_t(-1), where);
         std::size_t const vertices = xyz.size() / 3;
@@ -641,8 +650,11 @@ private:
         std::string const mesh_name = m.name.empty() ? index_name("meshes", mesh) : m.name;
         md.name = m.primitives.size() == 1 ? mesh_name : mesh_name + "." + index_name("primitives", index);
         std::size_t const n = indices.size();
-        check_limit(name_, where, p.mode == TINYGLTF_MODE_TRIANGLES ? n / 3 : n < 3 ? 0 : n - 2, limits.max_triangles,
-                    "triangles", "--max-triangles");
+        std::uint64_t const triangles = p.mode == TINYGLTF_MODE_TRIANGLES ? n / 3 : n < 3 ? 0 : n - 2;
+        check_limit(name_, where, held_triangles_ + triangles, limits.max_triangles, "triangles in the scene's meshes",
+                    "--max-triangles");
+        held_vertices_ += vertices;
+        held_triangles_ += triangles;
         if (p.mode == TINYGLTF_MODE_TRIANGLES) {
             if (n % 3 != 0) fail(where, "has " + std::to_string(n) + " vertices in TRIANGLES mode (not a multiple of 3)");
             for (std::size_t k = 0; k < n; k += 3) md.triangles.push_back({indices[k], indices[k + 1], indices[k + 2]});
@@ -860,6 +872,7 @@ private:
     std::map<int, int> const& same_as_;
     std::vector<std::optional<int>> materials_;
     std::vector<std::optional<std::vector<std::uint32_t>>> meshes_;
+    std::uint64_t held_vertices_ = 0, held_triangles_ = 0; // in the scene's meshes, this file's included
     std::map<std::pair<int, double>, int> images_;
     std::map<fs::path, int> image_files_;
 };
