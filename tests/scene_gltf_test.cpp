@@ -1053,3 +1053,18 @@ TEST_CASE("glTF meshes are held to --max-triangles together, before their access
     CHECK_THAT(load_error(dir.path / "quads.gltf"),
                Catch::Contains("quads.gltf: meshes[3].primitives[0]: 16 vertices in the scene's meshes exceed the limit of 15 (--max-triangles)"));
 }
+
+TEST_CASE("glTF mesh placements are held to --max-placements as the nodes are made") {
+    temp_folder const dir("canopy_gltf_test");
+    std::string nodes = "[{\"children\": [1, 2, 3, 4]}";
+    for (int i = 0; i < 4; ++i) nodes += ", {\"mesh\": 0}";
+    nodes += "]";
+    fs::path const file = with_nodes(dir.path / "many.gltf", nodes);
+    limits_guard const guard;
+    canopy::default_limits().max_placements = 4;
+    canopy::scene s;
+    plugins().load(s, file);
+    CHECK(s.meshes().size() == 1);
+    canopy::default_limits().max_placements = 3;
+    CHECK_THAT(load_error(file), Catch::Contains("many.gltf: nodes[4]: 4 mesh placements exceed the limit of 3 (--max-placements)"));
+}

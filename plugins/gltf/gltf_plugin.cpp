@@ -426,6 +426,10 @@ private:
         if (mesh < 0 || std::size_t(mesh) >= model_.meshes.size())
             fail(where, "mesh " + std::to_string(mesh) + " does not exist (" + std::to_string(model_.meshes.size()) +
                             " meshes)");
+        // Each placed primitive is a mesh node, placed once by compile(): held to --max-placements
+        // as they are made (a mesh of many primitives on many nodes multiplies).
+        placements_ += model_.meshes[std::size_t(mesh)].primitives.size();
+        check_limit(name_, where, placements_, default_limits().max_placements, "mesh placements", "--max-placements");
         std::vector<std::uint32_t> const& prims = mesh_of(mesh);
         if (prims.size() == 1) {
             s_.add_mesh_node(under, prims[0], name + " (mesh)");
@@ -873,6 +877,7 @@ private:
     std::vector<std::optional<int>> materials_;
     std::vector<std::optional<std::vector<std::uint32_t>>> meshes_;
     std::uint64_t held_vertices_ = 0, held_triangles_ = 0; // in the scene's meshes, this file's included
+    std::uint64_t placements_ = 0;                         // mesh nodes this file made
     std::map<std::pair<int, double>, int> images_;
     std::map<fs::path, int> image_files_;
 };
