@@ -897,7 +897,7 @@ TEST_CASE("OFF BINARY is checked like ASCII OFF: counts against the file and the
     CHECK(r.mesh.normals[0][2].z == 1.0f);
 }
 
-TEST_CASE("ASCII OFF: values beyond a float and counts beyond OpenMesh's are refused; normals, uvs and colours read") {
+TEST_CASE("ASCII OFF: values beyond a float and counts beyond OpenMesh's are refused, normals, uvs and colours read") {
     temp_folder const tmp("canopy_openmesh_test");
     tmp.write("huge.off", "OFF\n3 1 0\n0 0 0\n1 1e300 0\n0 1 0\n3 0 1 2\n");
     require_error(tmp.path / "huge.off", "huge.off:4: vertex 1: coordinate '1e300' overflows a float");
