@@ -528,7 +528,7 @@ TEST_CASE("bad glTF files give errors naming the file and the element") {
         expect(dir.path / "absent.gltf", {"absent.gltf"});
         canopy::scene s;
         CHECK_THROWS_WITH(canopy::load_gltf(s, dir.path / "absent.gltf", s.root(), plugins()),
-                          Catch::Contains("absent.gltf") && Catch::Contains("no such file"));
+                          Catch::Contains("absent.gltf") && Catch::Contains("file not found"));
     }
     SECTION("malformed JSON") {
         write_text(dir.path / "broken.gltf", "{\"asset\": {\"version\": \"2.0\"}, \"nodes\": [{\"mesh\": ");
@@ -541,12 +541,20 @@ TEST_CASE("bad glTF files give errors naming the file and the element") {
                    b.document("{\"uri\": \"absent.bin\", \"byteLength\": 36}",
                               "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
                               "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
-        expect(dir.path / "nobin.gltf", {"absent.bin"});
+        expect(dir.path / "nobin.gltf", {"nobin.gltf: buffers[0]: " + (dir.path / "absent.bin").string() + ": file not found (buffer)"});
+        b.external_buffer(dir.path / "short.bin");
+        write_text(dir.path / "short.gltf",
+                   b.document("{\"uri\": \"short.bin\", \"byteLength\": 40}",
+                              "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
+                              "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+        expect(dir.path / "short.gltf", {"short.gltf: buffers[0]: " + (dir.path / "short.bin").string() +
+                                         ": has 36 bytes, its byteLength says 40"});
     }
     SECTION("accessor reaching past its buffer view") {
         small_file f;
         f.index_count = "7";
-        expect(f.write(dir.path / "long.gltf"), {"meshes[0].primitives[0]", "accessors[1]", "bufferViews[1]"});
+        expect(f.write(dir.path / "long.gltf"),
+               {"long.gltf: accessors[1]: 7 elements of 2 bytes, 2 apart from byte 0, do not fit in bufferViews[1] (12 bytes)"});
     }
     SECTION("index out of range") {
         small_file f;
@@ -572,12 +580,12 @@ TEST_CASE("bad glTF files give errors naming the file and the element") {
     SECTION("node referring to a missing mesh") {
         small_file f;
         f.nodes = "[{\"mesh\": 9}]";
-        expect(f.write(dir.path / "nomesh.gltf"), {"nodes[0]", "mesh 9 does not exist"});
+        expect(f.write(dir.path / "nomesh.gltf"), {"nomesh.gltf: nodes[0].mesh: index 9 is out of range (1 meshes)"});
     }
     SECTION("node hierarchy with a cycle") {
         small_file f;
         f.nodes = "[{\"children\": [1]}, {\"mesh\": 0, \"children\": [0]}]";
-        expect(f.write(dir.path / "cycle.gltf"), {"nodes[0]", "reached twice"});
+        expect(f.write(dir.path / "cycle.gltf"), {"cycle.gltf: nodes[0]: is its own descendant (nodes[0] → nodes[1] → nodes[0])"});
     }
     SECTION("zero scale") {
         small_file f;
@@ -692,9 +700,10 @@ TEST_CASE("assimp's broken glTF files give errors naming the file and the elemen
         {"IndexOutOfRange/IndexOutOfRange.gltf", {"meshes[0].primitives[0]", "is out of range (24 vertices)"}},
         {"IndexOutOfRange/AllIndicesOutOfRange.gltf", {"meshes[0].primitives[0]", "index 65535 at position 0"}},
         {"BoxWithInfinites-glTF-Binary/BoxWithInfinites.glb", {"meshes[0].primitives[0]", "POSITION", "not finite"}},
-        {"RecursiveNodes/RecursiveNodes.gltf", {"nodes[", "reached twice"}},
+        {"RecursiveNodes/RecursiveNodes.gltf", {"nodes[0]: is its own descendant (nodes[0] → nodes[1] → nodes[0])"}},
         {"MissingBin/BoxTextured.gltf", {"BoxTextured0.bin"}},
-        {"IncorrectVertexArrays/Cube.gltf", {"meshes[1].primitives[0]", "not a multiple of 3"}},
+        // Its buffer views reach past its 514-byte buffer (found before its meshes are read).
+        {"IncorrectVertexArrays/Cube.gltf", {"bufferViews[2]: bytes 504 + 432 lie outside buffers[0] (514 bytes)"}},
         {"BoxTextured-glTF-techniqueWebGL/BoxTextured.gltf", {"extensionsRequired", "KHR_technique_webgl"}},
         // glTF 1.0 (assimp's glTF/ folder) is refused by version, not read as an empty scene.
         {"../glTF/TwoBoxes/TwoBoxes.gltf", {"asset.version", "glTF '1.0' is not supported"}},
@@ -738,4 +747,324 @@ TEST_CASE("assimp's textured box loads alike from .gltf, embedded .gltf and .glb
                 worst = std::max(worst, std::abs(d));
         CHECK(worst < 1e-6f);
     }
+}
+
+// ---- Schema violations, hostile hierarchies and files ---------------------------------------------
+
+namespace {
+
+// Restores canopy::default_limits() when it goes.
+struct limits_guard {
+    canopy::resource_limits saved = canopy::default_limits();
+    ~limits_guard() { canopy::default_limits() = saved; }
+};
+
+// The small quad file with `replace` substituted for the first `find` in its JSON text.
+fs::path small_file_with(fs::path const& file, std::string const& find, std::string const& replace,
+                         small_file const& f = {}) {
+    f.write(file);
+    std::ifstream in(file, std::ios::binary);
+    std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    auto const at = text.find(find);
+    REQUIRE(at != std::string::npos);
+    text.replace(at, find.size(), replace);
+    write_text(file, text);
+    return file;
+}
+
+// A document of the quad and `nodes` (a JSON array), every node holding the quad's mesh.
+fs::path with_nodes(fs::path const& file, std::string const& nodes, std::string const& scene_nodes = "[0]") {
+    small_file f;
+    f.nodes = nodes;
+    return small_file_with(file, "\"scenes\": [{\"nodes\": [0]}]", "\"scenes\": [{\"nodes\": " + scene_nodes + "}]", f);
+}
+
+// A PNG header claiming width × height (RGBA 8-bit), with CRCs, a token image data chunk and IEND.
+std::vector<unsigned char> png_claiming(std::uint32_t width, std::uint32_t height) {
+    auto const crc = [](std::string const& bytes) {
+        std::uint32_t c = 0xFFFFFFFFu;
+        for (unsigned char b : bytes) {
+            c ^= b;
+            for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
+        }
+        return ~c;
+    };
+    auto const be32 = [](std::string& out, std::uint32_t v) {
+        for (int k = 3; k >= 0; --k) out += char((v >> (8 * k)) & 0xFF);
+    };
+    std::string png = "\x89PNG\r\n\x1a\n";
+    auto const chunk = [&](std::string const& type, std::string const& data) {
+        be32(png, std::uint32_t(data.size()));
+        png += type + data;
+        be32(png, crc(type + data));
+    };
+    std::string ihdr;
+    be32(ihdr, width);
+    be32(ihdr, height);
+    ihdr += std::string("\x08\x06\x00\x00\x00", 5);
+    chunk("IHDR", ihdr);
+    chunk("IDAT", std::string("\x78\x9c\x63\x00\x00", 5));
+    chunk("IEND", "");
+    return {png.begin(), png.end()};
+}
+
+} // namespace
+
+TEST_CASE("glTF schema violations are refused with their JSON path, not dropped") {
+    temp_folder const dir("canopy_gltf_test");
+    auto const expect = [&](fs::path const& file, std::string const& message) {
+        std::string const m = load_error(file);
+        INFO(m);
+        CHECK(m.find(file.filename().string() + ": " + message) != std::string::npos);
+        CHECK(m.size() < 400);
+    };
+    small_file textured;
+    textured.primitive_extra = ", \"material\": 0";
+    textured.extra = ", \"materials\": [{\"pbrMetallicRoughness\": {\"baseColorTexture\": {\"index\": -1}}}]";
+    expect(textured.write(dir.path / "minus_one.gltf"),
+           "materials[0].pbrMetallicRoughness.baseColorTexture.index: index -1 is out of range (0 textures)");
+    textured.extra = ", \"materials\": [{\"pbrMetallicRoughness\": [\"not an object\"]}]";
+    expect(textured.write(dir.path / "array.gltf"), "materials[0].pbrMetallicRoughness: expected an object, got an array");
+    textured.extra = ", \"materials\": [{\"normalTexture\": {\"index\": 0, \"scale\": \"big\"}}], \"textures\": [{}]";
+    expect(textured.write(dir.path / "scale.gltf"), "materials[0].normalTexture.scale: expected a number, got a string ('big')");
+    textured.extra = ", \"materials\": [{\"pbrMetallicRoughness\": {\"baseColorFactor\": [1, 0.5, 1.5, 1]}}]";
+    expect(textured.write(dir.path / "factor.gltf"), "materials[0].pbrMetallicRoughness.baseColorFactor[2]: 1.5 is out of range [0, 1]");
+    textured.extra = ", \"materials\": [{\"alphaMode\": \"CLIP\"}]";
+    expect(textured.write(dir.path / "mode.gltf"), "materials[0].alphaMode: 'CLIP' is not one of OPAQUE, MASK, BLEND");
+    textured.extra = ", \"materials\": [{\"extensions\": {\"KHR_materials_unlit\": \"yes\"}}]";
+    expect(textured.write(dir.path / "extension.gltf"),
+           "materials[0].extensions.KHR_materials_unlit: expected an object, got a string ('yes')");
+
+    expect(small_file_with(dir.path / "primitives.gltf", "\"primitives\": [", "\"primitives\": [[], "),
+           "meshes[0].primitives[0]: expected an object, got an array");
+    expect(small_file_with(dir.path / "mesh.gltf", "\"nodes\": [{\"mesh\": 0}]", "\"nodes\": [{\"mesh\": 0.0}]"),
+           "nodes[0].mesh: expected an integer index, got the number 0");
+    expect(small_file_with(dir.path / "scene.gltf", "\"scenes\": [{\"nodes\": [0]}]", "\"scenes\": [{\"nodes\": [0]}], \"scene\": \"main\""),
+           "scene: expected an integer index, got a string ('main')");
+    expect(small_file_with(dir.path / "name.gltf", "\"nodes\": [{\"mesh\": 0}]", "\"nodes\": [{\"mesh\": 0, \"name\": 42}]"),
+           "nodes[0].name: expected a string, got the number 42");
+    expect(small_file_with(dir.path / "count.gltf", "\"count\": 6", "\"count\": -6"),
+           "accessors[1].count: -6 is out of range [1, 9007199254740992]");
+    expect(small_file_with(dir.path / "component.gltf", "\"componentType\": 5123", "\"componentType\": 5124"),
+           "accessors[1].componentType: 5124 is not one of 5120, 5121, 5122, 5123, 5125, 5126");
+    expect(small_file_with(dir.path / "type.gltf", "\"type\": \"SCALAR\"", "\"type\": \"VEC5\""),
+           "accessors[1].type: 'VEC5' is not one of SCALAR, VEC2, VEC3, VEC4, MAT2, MAT3, MAT4");
+    expect(small_file_with(dir.path / "stride.gltf", "\"byteOffset\": 0,", "\"byteOffset\": 0, \"byteStride\": 6,"),
+           "bufferViews[0].byteStride: 6 is not a multiple of 4");
+    expect(small_file_with(dir.path / "stride_small.gltf", "\"byteOffset\": 0,", "\"byteOffset\": 0, \"byteStride\": 8,"),
+           "accessors[0]: byteStride 8 of bufferViews[0] is smaller than an element (12 bytes)");
+    // Offsets that would overflow a 64-bit sum are out of range, not wrapped.
+    expect(small_file_with(dir.path / "offset.gltf", "\"byteOffset\": 0,", "\"byteOffset\": 9007199254740000,"),
+           "bufferViews[0]: bytes 9007199254740000 + 48 lie outside buffers[0] (60 bytes)");
+    expect(small_file_with(dir.path / "accessor_offset.gltf", "\"componentType\": 5126", "\"byteOffset\": 9007199254740000, \"componentType\": 5126"),
+           "accessors[0]: 4 elements of 12 bytes, 12 apart from byte 9007199254740000, do not fit in bufferViews[0] (48 bytes)");
+    expect(small_file_with(dir.path / "matrix.gltf", "\"nodes\": [{\"mesh\": 0}]", "\"nodes\": [{\"mesh\": 0, \"matrix\": [1, 0, 0]}]"),
+           "nodes[0].matrix: has 3 values (16 needed)");
+    expect(small_file_with(dir.path / "rotation.gltf", "\"nodes\": [{\"mesh\": 0}]", "\"nodes\": [{\"mesh\": 0, \"rotation\": [0, 0, 2, 1]}]"),
+           "nodes[0].rotation[2]: 2 is out of range [-1, 1]");
+    expect(small_file_with(dir.path / "children.gltf", "\"nodes\": [{\"mesh\": 0}]", "\"nodes\": [{\"mesh\": 0, \"children\": [1, 1]}, {}]"),
+           "nodes[0].children[1]: index 1 is listed twice");
+    expect(small_file_with(dir.path / "sparse.gltf", "\"componentType\": 5126", "\"componentType\": 5126, \"sparse\": {\"count\": 0}"),
+           "accessors[0].sparse.count: 0 is out of range [1, 4]");
+    // Finite in JSON, beyond a float in the scene.
+    expect(small_file_with(dir.path / "far.gltf", "\"nodes\": [{\"mesh\": 0}]", "\"nodes\": [{\"mesh\": 0, \"translation\": [1e300, 0, 0]}]"),
+           "nodes[0]: transform has a value beyond the range of a float");
+    expect(small_file_with(dir.path / "version.gltf", "\"version\": \"2.0\"", "\"version\": 2"),
+           "asset.version: expected a string, got the number 2");
+    // A long token is quoted by a short prefix.
+    expect(small_file_with(dir.path / "long.gltf", "\"nodes\": [{\"mesh\": 0}]", "\"nodes\": [{\"mesh\": \"" + std::string(100000, 'x') + "\"}]"),
+           "nodes[0].mesh: expected an integer index, got a string ('xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx…')");
+    write_text(dir.path / "broken.gltf", "{\"asset\": {\"version\": \"2.0\"}, \"nodes\": [\"" + std::string(100000, 'y'));
+    expect(dir.path / "broken.gltf", "malformed JSON: parse error at line 1");
+}
+
+TEST_CASE("glTF node hierarchies: no recursion, a limit on depth, cycles and second parents named") {
+    temp_folder const dir("canopy_gltf_test");
+    // A chain of 100,000 nodes: refused at the node past --max-depth (4096), quickly.
+    std::string chain = "[";
+    for (int i = 0; i < 100000; ++i)
+        chain += (i ? ", " : "") + std::string("{\"children\": [") + std::to_string(i + 1) + "]}";
+    chain += ", {\"mesh\": 0}]";
+    CHECK_THAT(load_error(with_nodes(dir.path / "chain.gltf", chain)),
+               Catch::Contains("chain.gltf: nodes[4096]: is 4097 levels deep in the node hierarchy, over the limit of 4096 (--max-depth)"));
+    {
+        // At the limit a chain loads (the limit also bounds the JSON's nesting, 6 levels here).
+        limits_guard const guard;
+        canopy::default_limits().max_depth = 8;
+        auto const chain_of = [](int n) {
+            std::string nodes = "[";
+            for (int i = 0; i + 1 < n; ++i) nodes += "{\"children\": [" + std::to_string(i + 1) + "]}, ";
+            return nodes + "{\"mesh\": 0}]";
+        };
+        canopy::scene s;
+        plugins().load(s, with_nodes(dir.path / "eight.gltf", chain_of(8)));
+        CHECK(s.meshes().size() == 1);
+        CHECK_THAT(load_error(with_nodes(dir.path / "nine.gltf", chain_of(9))),
+                   Catch::Contains("nine.gltf: nodes[8]: is 9 levels deep in the node hierarchy, over the limit of 8 (--max-depth)"));
+    }
+    CHECK_THAT(load_error(with_nodes(dir.path / "self.gltf", "[{\"mesh\": 0, \"children\": [0]}]")),
+               Catch::Contains("self.gltf: nodes[0]: is its own descendant (nodes[0] → nodes[0])"));
+    CHECK_THAT(load_error(with_nodes(dir.path / "ring.gltf", "[{\"mesh\": 0}, {\"children\": [2]}, {\"children\": [1]}]")),
+               Catch::Contains("ring.gltf: nodes[1]: is its own descendant (nodes[1] → nodes[2] → nodes[1])"));
+    CHECK_THAT(load_error(with_nodes(dir.path / "two.gltf", "[{\"children\": [2]}, {\"children\": [2]}, {\"mesh\": 0}]", "[0, 1]")),
+               Catch::Contains("two.gltf: nodes[2]: is a child of both nodes[0] and nodes[1] (a glTF node has at most one parent)"));
+    CHECK_THAT(load_error(with_nodes(dir.path / "root.gltf", "[{\"children\": [1]}, {\"mesh\": 0}]", "[0, 1]")),
+               Catch::Contains("root.gltf: scenes[0].nodes: nodes[1] is a child of nodes[0], not a root node"));
+    // JSON nested without end (in extras, which tinygltf copies recursively).
+    CHECK_THAT(load_error(small_file_with(dir.path / "deep.gltf", "\"nodes\": [{\"mesh\": 0}]",
+                                          "\"nodes\": [{\"mesh\": 0, \"extras\": " + std::string(100000, '[') +
+                                              std::string(100000, ']') + "}]")),
+               Catch::Contains("deep.gltf: JSON arrays and objects nest deeper than 512 levels") &&
+                   Catch::Contains("over the limit of the glTF loader"));
+}
+
+TEST_CASE("glTF buffers and images that are devices, huge or not images are refused by name") {
+    temp_folder const dir("canopy_gltf_test");
+    // An external buffer and a texture that are /dev/zero.
+    gltf_builder b;
+    b.vec3s({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    fs::create_symlink("/dev/zero", dir.path / "zero.bin");
+    write_text(dir.path / "zero_buffer.gltf",
+               b.document("{\"uri\": \"zero.bin\", \"byteLength\": 36}",
+                          "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], \"nodes\": [{\"mesh\": 0}], "
+                          "\"scenes\": [{\"nodes\": [0]}]"));
+    CHECK_THAT(load_error(dir.path / "zero_buffer.gltf"),
+               Catch::Contains("zero_buffer.gltf: buffers[0]: " + (dir.path / "zero.bin").string() +
+                               ": is a character device, not a regular file (buffer)"));
+    fs::create_symlink("/dev/zero", dir.path / "zero.png");
+    gltf_builder t;
+    int const pos = t.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
+    int const uv = t.vec2s({0, 1, 1, 1, 1, 0});
+    std::string const mesh = "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": " + std::to_string(pos) +
+                             ", \"TEXCOORD_0\": " + std::to_string(uv) + "}, \"material\": 0}]}], \"nodes\": [{\"mesh\": 0}], "
+                             "\"scenes\": [{\"nodes\": [0]}], \"materials\": [{\"pbrMetallicRoughness\": "
+                             "{\"baseColorTexture\": {\"index\": 0}}}], \"textures\": [{\"source\": 0}], ";
+    write_text(dir.path / "zero_texture.gltf", t.document(t.embedded_buffer(), mesh + "\"images\": [{\"uri\": \"zero.png\"}]"));
+    CHECK_THAT(load_error(dir.path / "zero_texture.gltf"),
+               Catch::Contains("zero_texture.gltf: images[0]: 'zero.png': " + (dir.path / "zero.png").string() +
+                               ": is a character device, not a regular file (texture)"));
+
+    // An embedded PNG whose header claims 16384 × 16384: refused before stb_image decodes it.
+    gltf_builder g = t;
+    auto const png = png_claiming(16384, 16384);
+    int const view = g.add_view(png.data(), png.size());
+    std::string const json = g.document("{\"byteLength\": " + std::to_string(g.bin.size()) + "}",
+                                        mesh + "\"images\": [{\"bufferView\": " + std::to_string(view) + ", \"mimeType\": \"image/png\"}]");
+    write_glb(dir.path / "big.glb", json, g.bin);
+    CHECK_THAT(load_error(dir.path / "big.glb"),
+               Catch::Contains("big.glb: images[0]: embedded image is 16384 × 16384 (268435456 texels), over the limit of "
+                               "67108864 texels (--max-texels)"));
+    std::vector<unsigned char> const gif{'G', 'I', 'F', '8', '9', 'a', 1, 0, 1, 0, 0, 0, 0};
+    write_text(dir.path / "gif.gltf", t.document(t.embedded_buffer(), mesh + "\"images\": [{\"uri\": \"data:image/gif;base64," +
+                                                                         base64(gif) + "\"}]"));
+    CHECK_THAT(load_error(dir.path / "gif.gltf"), Catch::Contains("gif.gltf: images[0]: embedded image is neither PNG nor JPEG"));
+    // A data: URI tinygltf does not decode: quoted by a short prefix, not in full.
+    write_text(dir.path / "webp.gltf", t.document(t.embedded_buffer(), mesh + "\"images\": [{\"uri\": \"data:image/webp;base64," +
+                                                                          std::string(200000, 'A') + "\"}]"));
+    std::string const webp = load_error(dir.path / "webp.gltf");
+    CHECK_THAT(webp, Catch::Contains("webp.gltf: images[0]: data: URI 'data:image/webp;base64,AAAAAAAAAAAAAAAAA…' is not one tinygltf decodes"));
+    CHECK(webp.size() < 400);
+
+    // A .glb whose BIN chunk claims more than the file.
+    std::string bytes;
+    {
+        write_glb(dir.path / "cut.glb", json, g.bin);
+        std::ifstream in(dir.path / "cut.glb", std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    std::size_t const bin_header = 20 + (bytes[12] & 0xFF) + ((bytes[13] & 0xFF) << 8);
+    bytes[bin_header + 3] = '\x10';
+    write_text(dir.path / "cut.glb", bytes);
+    CHECK_THAT(load_error(dir.path / "cut.glb"), Catch::Contains("cut.glb: not a valid .glb file: its BIN chunk of"));
+}
+
+TEST_CASE("glTF images of the same bytes or file are decoded once, and alpha factors move the cutoff, not the texels") {
+    temp_folder const dir("canopy_gltf_test");
+    write_mask_png(dir.path / "mask.png");
+    auto const png = read_bytes(dir.path / "mask.png");
+    gltf_builder b;
+    int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
+    int const uv = b.vec2s({0, 1, 1, 1, 1, 0});
+    int const view = b.add_view(png.data(), png.size());
+    b.views.push_back(b.views[std::size_t(view)]); // a second view of the same bytes
+    std::string primitives;
+    for (int m = 0; m < 5; ++m)
+        primitives += std::string(m ? ", " : "") + "{\"attributes\": {\"POSITION\": " + std::to_string(pos) +
+                      ", \"TEXCOORD_0\": " + std::to_string(uv) + "}, \"material\": " + std::to_string(m) + "}";
+    auto const material = [](int texture, double alpha) {
+        return "{\"alphaMode\": \"MASK\", \"alphaCutoff\": 0.5, \"pbrMetallicRoughness\": {\"baseColorFactor\": [1, 1, 1, " +
+               std::to_string(alpha) + "], \"baseColorTexture\": {\"index\": " + std::to_string(texture) + "}}}";
+    };
+    std::string const rest =
+        "\"meshes\": [{\"primitives\": [" + primitives + "]}], \"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}], "
+        "\"materials\": [" + material(0, 1.0) + ", " + material(1, 0.5) + ", " + material(2, 0.25) + ", " + material(3, 1.0) +
+        ", " + material(4, 0.8) + "], \"textures\": [{\"source\": 0}, {\"source\": 1}, {\"source\": 2}, {\"source\": 3}, {\"source\": 4}], "
+        "\"images\": [{\"bufferView\": " + std::to_string(view) + ", \"mimeType\": \"image/png\"}, {\"bufferView\": " +
+        std::to_string(view + 1) + ", \"mimeType\": \"image/png\"}, {\"bufferView\": " + std::to_string(view) +
+        ", \"mimeType\": \"image/png\"}, {\"uri\": \"mask.png\"}, {\"uri\": \"mask.png\"}]";
+    write_glb(dir.path / "shared.glb", b.document("{\"byteLength\": " + std::to_string(b.bin.size()) + "}", rest), b.bin);
+    canopy::scene s;
+    plugins().load(s, dir.path / "shared.glb");
+    // Images 0-2 (one buffer range) are one image, 3-4 (one file) another; factor 0.25 < cutoff 0.5
+    // leaves only holes (a texel of alpha 0).
+    REQUIRE(s.materials().size() == 5);
+    REQUIRE(s.images().size() == 3);
+    auto const& m = s.materials();
+    CHECK(m[0].image == m[1].image);
+    CHECK(m[3].image == m[4].image);
+    CHECK(m[0].image != m[3].image);
+    CHECK(m[0].alpha_cutoff == 0.5f);
+    CHECK(m[1].alpha_cutoff == 1.0f);
+    CHECK(m[4].alpha_cutoff == float(0.5 / 0.8));
+    auto const& hole = s.images()[std::size_t(m[2].image)];
+    REQUIRE(hole.texels.size() == 1);
+    CHECK(hole.texels[0].w == 0.0f);
+    // The texels as stored in the file: the opaque quadrant keeps alpha 1.
+    auto const& shared = s.images()[std::size_t(m[0].image)];
+    REQUIRE(shared.width == 4);
+    CHECK(shared.texels[5].w == 1.0f);
+    CHECK(shared.texels[10].w == 0.0f);
+}
+
+TEST_CASE("glTF meshes are held to --max-triangles together, before their accessors are read") {
+    temp_folder const dir("canopy_gltf_test");
+    // Four meshes of one primitive each, all on the quad's accessors: 16 vertices, 8 triangles.
+    small_file f;
+    f.write(dir.path / "quads.gltf");
+    std::ifstream in(dir.path / "quads.gltf", std::ios::binary);
+    std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    std::string const meshes_key = "\"meshes\": [";
+    auto const start = text.find(meshes_key) + meshes_key.size();
+    auto const end = text.find("]}], \"nodes\"") + 2;
+    std::string const one = text.substr(start, end - start);
+    text.replace(start, end - start, one + ", " + one + ", " + one + ", " + one);
+    text.replace(text.find("\"nodes\": [{\"mesh\": 0}]"), 22,
+                 "\"nodes\": [{\"mesh\": 0, \"children\": [1, 2, 3]}, {\"mesh\": 1}, {\"mesh\": 2}, {\"mesh\": 3}]");
+    write_text(dir.path / "quads.gltf", text);
+    limits_guard const guard;
+    canopy::default_limits().max_triangles = 16;
+    canopy::scene s;
+    plugins().load(s, dir.path / "quads.gltf");
+    CHECK(s.meshes().size() == 4);
+    canopy::default_limits().max_triangles = 7;
+    CHECK_THAT(load_error(dir.path / "quads.gltf"),
+               Catch::Contains("quads.gltf: meshes[1].primitives[0]: 8 vertices in the scene's meshes exceed the limit of 7 (--max-triangles)"));
+    canopy::default_limits().max_triangles = 15;
+    CHECK_THAT(load_error(dir.path / "quads.gltf"),
+               Catch::Contains("quads.gltf: meshes[3].primitives[0]: 16 vertices in the scene's meshes exceed the limit of 15 (--max-triangles)"));
+}
+
+TEST_CASE("glTF mesh placements are held to --max-placements as the nodes are made") {
+    temp_folder const dir("canopy_gltf_test");
+    std::string nodes = "[{\"children\": [1, 2, 3, 4]}";
+    for (int i = 0; i < 4; ++i) nodes += ", {\"mesh\": 0}";
+    nodes += "]";
+    fs::path const file = with_nodes(dir.path / "many.gltf", nodes);
+    limits_guard const guard;
+    canopy::default_limits().max_placements = 4;
+    canopy::scene s;
+    plugins().load(s, file);
+    CHECK(s.meshes().size() == 1);
+    canopy::default_limits().max_placements = 3;
+    CHECK_THAT(load_error(file), Catch::Contains("many.gltf: nodes[4]: 4 mesh placements exceed the limit of 3 (--max-placements)"));
 }

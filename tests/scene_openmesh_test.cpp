@@ -590,7 +590,7 @@ TEST_CASE("OM files written by OpenMesh load with their normals and texture coor
     // Cut short after its header: OpenMesh's reader fails, or reads fewer faces than declared.
     std::string const om = read_file(tmp.path / "pyramid.om");
     tmp.write("cut.om", om.substr(0, 40));
-    require_error(tmp.path / "cut.om", "OpenMesh cannot read it");
+    require_error(tmp.path / "cut.om", "the header declares 5 vertices, 5 faces and 8 edges, more than the file's 40 bytes hold");
     tmp.write("cut.om", om.substr(0, om.size() - 20));
     require_error(tmp.path / "cut.om", "5 of 5 faces were dropped");
 }
@@ -632,9 +632,11 @@ TEST_CASE("missing, empty and truncated files are errors naming the file") {
 
     std::string const ply = pyramid::ply_binary(false);
     tmp.write("cut.ply", ply.substr(0, ply.size() - 7));
-    require_error(tmp.path / "cut.ply", "file ends in face 4 of 5");
+    require_error(tmp.path / "cut.ply", "element 'face' declares 5 entries of at least 13 bytes");
     tmp.write("cut_vertices.ply", ply.substr(0, ply.find("end_header") + 11 + 40));
-    require_error(tmp.path / "cut_vertices.ply", "file ends in vertex 1 of 5");
+    require_error(tmp.path / "cut_vertices.ply", "element 'vertex' declares 5 entries of at least 32 bytes");
+    tmp.write("cut_list.ply", ply.substr(0, ply.size() - 2)); // within the last face's indices
+    require_error(tmp.path / "cut_list.ply", "file ends in face 4 of 5");
 
     std::string const stl = read_file("/usr/share/assimp/models/STL/Spider_binary.stl");
     tmp.write("cut.stl", stl.substr(0, stl.size() - 30));
@@ -656,7 +658,7 @@ TEST_CASE("NaN and infinite coordinates are errors naming the file and the place
     tmp.write("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n");
     require_error(tmp.path / "inf.obj", "inf.obj:3: vertex coordinate 'inf' is not a finite number");
     tmp.write("huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1 1e999\nf 1 2 3\n");
-    require_error(tmp.path / "huge.obj", "huge.obj:3: vertex coordinate '1e999' is not a finite number");
+    require_error(tmp.path / "huge.obj", "huge.obj:3: vertex coordinate '1e999' overflows a float");
     std::string ascii = pyramid::ply_ascii();
     ascii.replace(ascii.find("end_header\n") + 11, 1, "-inf");
     tmp.write("inf.ply", ascii);
@@ -747,4 +749,233 @@ TEST_CASE("the openmesh plugin registers its extensions and keeps OpenMesh's mes
     std::cerr.rdbuf(old);
     CHECK(result.faces == 3);
     CHECK(captured.str().empty());
+}
+
+// ---- Hostile files: what OpenMesh's readers would loop on, allocate for or misread ---------------
+
+namespace {
+
+// Restores canopy::default_limits() when it goes.
+struct limits_guard {
+    canopy::resource_limits saved = canopy::default_limits();
+    ~limits_guard() { canopy::default_limits() = saved; }
+};
+
+std::string triangle_ply(std::string const& format, std::string const& x_type, std::string const& body) {
+    return "ply\nformat " + format + " 1.0\nelement vertex 3\nproperty " + x_type + " x\nproperty " + x_type +
+           " y\nproperty " + x_type + " z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n" + body;
+}
+
+// OFF BINARY (OpenMesh's layout): the header line, u32 counts, float positions [and normals], faces.
+std::string off_binary(std::string const& header, std::uint32_t vertices, std::uint32_t faces,
+                       std::vector<float> const& values, std::vector<std::uint32_t> const& face_data) {
+    std::string s = header + "\n";
+    for (std::uint32_t v : {vertices, faces, 0u}) pyramid::put(s, v, false);
+    for (float v : values) pyramid::put(s, v, false);
+    for (std::uint32_t v : face_data) pyramid::put(s, v, false);
+    return s;
+}
+
+} // namespace
+
+TEST_CASE("PLY values OpenMesh's stream cannot read are refused with the value, not looped on") {
+    temp_folder const tmp("canopy_openmesh_test");
+    // A double that overflows a float: OpenMesh reads coordinates as floats, its stream fails and
+    // every later read fails while its loops go on (the face loop then grows a vector without end).
+    tmp.write("double.ply", triangle_ply("ascii", "double", "1e300 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
+    require_error(tmp.path / "double.ply", "double.ply:10: vertex 0: coordinate x = '1e300' overflows a float");
+    tmp.write("normal.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                            "property float nx\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n"
+                            "0 0 0 1\n1 0 0 -3.5e38\n0 1 0 0\n");
+    require_error(tmp.path / "normal.ply", "normal.ply:12: vertex 1: nx = '-3.5e38' overflows a float");
+    tmp.write("nan.ply", triangle_ply("ascii", "float", "0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n"));
+    require_error(tmp.path / "nan.ply", "nan.ply:11: vertex 1: coordinate y = 'nan' is not finite");
+    tmp.write("index.ply", triangle_ply("ascii", "float", "0 0 0\n1 0 0\n0 1 0\n3 0 1.0 2\n"));
+    require_error(tmp.path / "index.ply", "index.ply:13: face 0: vertex_indices = '1.0' is not an integer");
+    std::string binary = triangle_ply("binary_little_endian", "double", "");
+    for (double v : {1e300, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0}) pyramid::put(binary, v, false);
+    binary += '\3';
+    for (std::int32_t i : {0, 1, 2}) pyramid::put(binary, i, false);
+    tmp.write("double_binary.ply", binary);
+    require_error(tmp.path / "double_binary.ply", "double_binary.ply: vertex 0: coordinate x = 1e+300 overflows a float");
+
+    // Too small for a float is no error: the stream reads 0, as here.
+    tmp.write("tiny.ply", triangle_ply("ascii", "float", "1e-50 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
+    auto const tiny = canopy::read_openmesh(tmp.path / "tiny.ply");
+    REQUIRE(tiny.mesh.positions.size() == 3);
+    CHECK(tiny.mesh.positions[0].x == 0.0f);
+    CHECK(tiny.mesh.triangles.size() == 1);
+}
+
+TEST_CASE("PLY counts are checked against OpenMesh's integers, the file's size and --max-triangles") {
+    temp_folder const tmp("canopy_openmesh_test");
+    std::string const header = "ply\nformat binary_little_endian 1.0\nelement vertex ";
+    std::string const rest = "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+    // A count OpenMesh's header reader (an unsigned int from a stream) cannot hold: it would loop
+    // on its header for ever.
+    tmp.write("wide.ply", header + "4294967296" + rest);
+    require_error(tmp.path / "wide.ply", "wide.ply:3: element 'vertex': count 4294967296 is more than OpenMesh reads (2^32 - 1)");
+    // More vertices than the file holds: refused before OpenMesh reserves for them.
+    tmp.write("short.ply", header + "100000000" + rest + std::string(36, '\0'));
+    require_error(tmp.path / "short.ply", "short.ply: element 'vertex' declares 100000000 entries of at least 12 bytes, "
+                                          "more than the 36 bytes after the header hold");
+    tmp.write("text.ply", "ply\nformat ascii 1.0\nelement vertex 2000000\nproperty float x\nproperty float y\n"
+                          "property float z\nend_header\n0 0 0\n");
+    require_error(tmp.path / "text.ply", "element 'vertex' declares 2000000 entries of at least 3 values");
+    limits_guard const guard;
+    canopy::default_limits().max_triangles = 4;
+    tmp.write("many.ply", header + "5" + rest + std::string(60, '\0'));
+    require_error(tmp.path / "many.ply", "many.ply: 5 vertices exceed the limit of 4 (--max-triangles)");
+}
+
+TEST_CASE("PLY layouts OpenMesh misreads are refused, naming what it would do") {
+    temp_folder const tmp("canopy_openmesh_test");
+    std::string body;
+    for (float v : {0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f}) pyramid::put(body, v, false);
+    body += '\3';
+    for (std::int32_t i : {0, 1, 2}) pyramid::put(body, i, false);
+    std::string const good = triangle_ply("binary_little_endian", "float", body);
+    tmp.write("good.ply", good);
+    CHECK(canopy::read_openmesh(tmp.path / "good.ply").mesh.triangles.size() == 1);
+
+    // A comment right before end_header: OpenMesh seeks one byte into the data.
+    std::string commented = good;
+    commented.insert(commented.find("end_header"), "comment last\n");
+    tmp.write("comment.ply", commented);
+    std::size_t const data = commented.find("end_header\n") + 11;
+    require_error(tmp.path / "comment.ply", "comment.ply: OpenMesh would read the binary data from byte " +
+                                                std::to_string(data + 1) + ", not from byte " + std::to_string(data));
+    // Lists other than the face's vertex_indices: OpenMesh reads one value of them.
+    std::string listed = triangle_ply("ascii", "float", "0 0 0\n1 0 0\n0 1 0\n3 0 1 2 6 0 0 1 0 0 1\n");
+    listed.insert(listed.find("end_header"), "property list uchar float texcoord\n");
+    tmp.write("texcoord.ply", listed);
+    require_error(tmp.path / "texcoord.ply",
+                  "texcoord.ply: face property 'texcoord': OpenMesh reads no list property other than the face's vertex_indices");
+    // Binary coordinates of an integer type: OpenMesh reads none of their bytes.
+    tmp.write("int.ply", triangle_ply("binary_little_endian", "int", std::string(49, '\0')));
+    require_error(tmp.path / "int.ply", "vertex property 'x' of type 'int' is not read by OpenMesh from binary files");
+    std::string uint_count = triangle_ply("ascii", "float", "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+    uint_count.replace(uint_count.find("list uchar"), 10, "list uint");
+    tmp.write("count.ply", uint_count);
+    require_error(tmp.path / "count.ply", "count.ply:8: list 'vertex_indices': count type 'uint' is not one OpenMesh reads");
+    tmp.write("format.ply", "ply\ncomment first\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n");
+    require_error(tmp.path / "format.ply", "format.ply:2: the line after 'ply' must be 'format <type> <version>'");
+    tmp.write("no_end.ply", "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\ncomment end_header\n");
+    require_error(tmp.path / "no_end.ply", "no_end.ply: PLY header has no end_header line");
+}
+
+TEST_CASE("OFF BINARY is checked like ASCII OFF: counts against the file and the limit, values, indices") {
+    temp_folder const tmp("canopy_openmesh_test");
+    std::vector<float> const triangle{0, 0, 0, 1, 0, 0, 0, 1, 0};
+    // Counts of 2·10^9: OpenMesh would reserve for them and loop reading past the end.
+    tmp.write("huge.off", off_binary("OFF BINARY", 2000000000u, 2000000000u, triangle, {3, 0, 1, 2}));
+    require_error(tmp.path / "huge.off", "huge.off: 2000000000 vertices exceed the limit of 268435456 (--max-triangles)");
+    tmp.write("short.off", off_binary("OFF BINARY", 1000, 1, triangle, {3, 0, 1, 2}));
+    require_error(tmp.path / "short.off", "short.off: the header declares 1000 vertices of 12 bytes, more than the 52 bytes after it hold");
+    tmp.write("faces.off", off_binary("OFF BINARY", 3, 1000, triangle, {3, 0, 1, 2}));
+    require_error(tmp.path / "faces.off", "faces.off: the header declares 1000 faces of at least 16 bytes, more than the 16 bytes");
+    tmp.write("range.off", off_binary("OFF BINARY", 3, 1, triangle, {3, 0, 7, 2}));
+    require_error(tmp.path / "range.off", "range.off: face 0: vertex index 7 is out of range (3 vertices)");
+    tmp.write("corners.off", off_binary("OFF BINARY", 3, 1, triangle, {2, 0, 1, 2}));
+    require_error(tmp.path / "corners.off", "corners.off: face 0: has 2 corners (at least 3 needed)");
+    std::vector<float> with_nan = triangle;
+    with_nan[4] = std::numeric_limits<float>::quiet_NaN();
+    tmp.write("nan.off", off_binary("OFF BINARY", 3, 1, with_nan, {3, 0, 1, 2}));
+    require_error(tmp.path / "nan.off", "nan.off: vertex 1: position has a value that is not finite");
+
+    // A good one, with normals: positions, normals and the face as written.
+    std::vector<float> values;
+    for (std::size_t v = 0; v < 3; ++v) values.insert(values.end(), {triangle[3 * v], triangle[3 * v + 1], triangle[3 * v + 2], 0, 0, 1});
+    tmp.write("good.off", off_binary("NOFF BINARY", 3, 1, values, {3, 0, 1, 2}));
+    auto const r = canopy::read_openmesh(tmp.path / "good.off");
+    REQUIRE(r.mesh.positions.size() == 3);
+    CHECK(r.mesh.positions[1].x == 1.0f);
+    CHECK(r.mesh.positions[2].y == 1.0f);
+    REQUIRE(r.mesh.triangles.size() == 1);
+    CHECK(r.mesh.triangles[0] == std::array<std::uint32_t, 3>{0, 1, 2});
+    REQUIRE(r.mesh.normals.size() == 1);
+    CHECK(r.mesh.normals[0][2].z == 1.0f);
+}
+
+TEST_CASE("ASCII OFF: values beyond a float and counts beyond OpenMesh's are refused, normals, uvs and colours read") {
+    temp_folder const tmp("canopy_openmesh_test");
+    tmp.write("huge.off", "OFF\n3 1 0\n0 0 0\n1 1e300 0\n0 1 0\n3 0 1 2\n");
+    require_error(tmp.path / "huge.off", "huge.off:4: vertex 1: coordinate '1e300' overflows a float");
+    tmp.write("wide.off", "OFF\n4294967296 1 0\n");
+    require_error(tmp.path / "wide.off", "wide.off:2: OFF count 4294967296 is more than OpenMesh reads (2^32 - 1)");
+    tmp.write("uv.off", "STOFF\n3 1 0\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1e39\n3 0 1 2\n");
+    require_error(tmp.path / "uv.off", "uv.off:5: vertex 2: texture coordinate '1e39' overflows a float");
+    {
+        limits_guard const guard;
+        canopy::default_limits().max_triangles = 2;
+        tmp.write("many.off", "OFF\n3 3 0\n");
+        require_error(tmp.path / "many.off", "many.off:2: 3 vertices exceed the limit of 2 (--max-triangles)");
+    }
+
+    // NOFF after a binary NOFF (OpenMesh's reader keeps a file's flags), STOFF with a COFF colour,
+    // and a face line with a colour but no C in its header (the colour is not read as a face).
+    std::vector<float> values;
+    for (float v : {0.f, 0.f, 0.f, 0.f, 0.f, 1.f, 1.f, 0.f, 0.f, 0.f, 0.f, 1.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f}) values.push_back(v);
+    tmp.write("first.off", off_binary("NOFF BINARY", 3, 1, values, {3, 0, 1, 2}));
+    CHECK(canopy::read_openmesh(tmp.path / "first.off").vertex_normals);
+    tmp.write("plain.off", "OFF\n# comment\n3 2 0\n0 0 0\n2 0 0\n0 3 0\n3 0 1 2 255 0 0\n3 2 1 0\n");
+    auto const plain = canopy::read_openmesh(tmp.path / "plain.off");
+    CHECK_FALSE(plain.vertex_normals);
+    REQUIRE(plain.mesh.positions.size() == 3);
+    CHECK(plain.mesh.positions[1].x == 2.0f);
+    CHECK(plain.mesh.positions[2].y == 3.0f);
+    using tri = std::array<std::uint32_t, 3>;
+    REQUIRE(plain.mesh.triangles.size() == 2);
+    CHECK(plain.mesh.triangles[1] == tri{2, 1, 0});
+    tmp.write("normals.off", "NOFF\n3 1 0\n0 0 0 0 0 1\n1 0 0 0 1 0\n0 1 0 1 0 0\n3 0 1 2\n");
+    auto const n = canopy::read_openmesh(tmp.path / "normals.off");
+    REQUIRE(n.mesh.normals.size() == 1);
+    CHECK(n.mesh.normals[0][0].z == 1.0f);
+    CHECK(n.mesh.normals[0][1].y == 1.0f);
+    CHECK(n.mesh.normals[0][2].x == 1.0f);
+    tmp.write("uvs.off", "STCOFF\n3 1 0\n0 0 0 255 0 0 0.25 0.5\n1 0 0 0.5 0.5 0.5 1 0.75\n0 1 0 0 1\n3 0 1 2\n");
+    auto const uv = canopy::read_openmesh(tmp.path / "uvs.off");
+    REQUIRE(uv.mesh.uvs.size() == 1);
+    CHECK(uv.mesh.uvs[0][0].x == 0.25f);
+    CHECK(uv.mesh.uvs[0][0].y == 0.5f);
+    CHECK(uv.mesh.uvs[0][1].x == 1.0f);
+    CHECK(uv.mesh.uvs[0][1].y == 0.75f);
+    CHECK(uv.mesh.uvs[0][2].y == 1.0f);
+}
+
+TEST_CASE("STL, OBJ and OM: values beyond a float, the lines OpenMesh reads, counts against the limit and the file") {
+    temp_folder const tmp("canopy_openmesh_test");
+    tmp.write("huge.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 1e39\nvertex 0 1 0\n"
+                          "endloop\nendfacet\nendsolid x\n");
+    require_error(tmp.path / "huge.stl", "huge.stl:5: coordinate '1e39' overflows a float");
+    tmp.write("loop.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\nendsolid x\n");
+    require_error(tmp.path / "loop.stl", "loop.stl:6: facet 0: expected 'vertex x y z'");
+    tmp.write("uv.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 1e39\nf 1/1 2/1 3/1\n");
+    require_error(tmp.path / "uv.obj", "uv.obj:4: texture coordinate value '1e39' overflows a float");
+    {
+        limits_guard const guard;
+        canopy::default_limits().max_triangles = 1;
+        std::string stl(80, ' ');
+        pyramid::put(stl, std::uint32_t(2), false);
+        stl += std::string(100, '\0');
+        tmp.write("two.stl", stl);
+        require_error(tmp.path / "two.stl", "two.stl: 6 vertices exceed the limit of 1 (--max-triangles)");
+    }
+    std::string om = "OM";
+    om += 'T';
+    om += char(2);
+    for (std::uint32_t v : {100000000u, 1u, 3u}) pyramid::put(om, v, false);
+    om += std::string(64, '\0');
+    tmp.write("big.om", om);
+    require_error(tmp.path / "big.om", "big.om: the header declares 100000000 vertices, 1 faces and 3 edges, more than the file's 80 bytes hold");
+}
+
+TEST_CASE("a mesh file that is a device or a folder is refused before it is opened") {
+    temp_folder const tmp("canopy_openmesh_test");
+    fs::create_symlink("/dev/zero", tmp.path / "zero.ply");
+    fs::create_directory(tmp.path / "folder.off");
+    require_error(tmp.path / "zero.ply", "zero.ply: is a character device, not a regular file");
+    CHECK_THROWS_WITH(canopy::read_openmesh(tmp.path / "zero.ply"),
+                      Catch::Contains("zero.ply: is a character device, not a regular file"));
+    CHECK_THROWS_WITH(canopy::read_openmesh(tmp.path / "folder.off"), Catch::Contains("folder.off: is a folder, not a regular file"));
 }

@@ -1,6 +1,9 @@
 // Tests of canopy.texture. References are hand-computed texels and blends, a double-precision
 // bilinear filter whose address modes are written as loops (repeated shifts and reflections),
-// and, for SIMD coordinates, the scalar tex2D run lane by lane.
+// and, for SIMD coordinates, the scalar tex2D run lane by lane. Then the reading of texture
+// files (canopy.image_io, canopy.plugins.oiio): hand-written image files with known texels, and
+// hostile ones (a header claiming 16384 × 16384, a /dev/zero symlink) refused by name before
+// anything is decoded.
 #include <catch2/catch.hpp>
 
 #include <algorithm>
@@ -9,13 +12,20 @@
 #include <cmath>
 #include <concepts>
 #include <cstdint>
+#include <filesystem>
 #include <limits>
 #include <random>
 #include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "test_support.hpp"
+
 import canopy.texture;
+import canopy.scene;
+import canopy.image_io;
+import canopy.plugins.oiio;
 
 namespace {
 
@@ -427,4 +437,187 @@ TEMPLATE_TEST_CASE("tex2D on SIMD coordinates equals scalar tex2D lane by lane, 
     check_texture(random_texture<rgba>(7, 1, rng));
     check_texture(random_texture<float>(5, 6, rng));
     check_texture(random_texture<float>(1, 1, rng));
+}
+
+// ---- Texture files --------------------------------------------------------------------------------
+
+namespace {
+
+namespace fs = std::filesystem;
+using test_support::temp_folder;
+
+// Restores canopy::default_limits() when it goes.
+struct limits_guard {
+    canopy::resource_limits saved = canopy::default_limits();
+    ~limits_guard() { canopy::default_limits() = saved; }
+};
+
+std::uint32_t crc32(std::string const& bytes) {
+    std::uint32_t c = 0xFFFFFFFFu;
+    for (unsigned char b : bytes) {
+        c ^= b;
+        for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
+    }
+    return ~c;
+}
+
+void put_be32(std::string& out, std::uint32_t v) {
+    for (int k = 3; k >= 0; --k) out += char((v >> (8 * k)) & 0xFF);
+}
+
+// A PNG whose header (IHDR) says width × height, RGBA 8-bit, followed by a few bytes of image
+// data and the end: some 60 bytes that claim width · height texels.
+std::string png_claiming(std::uint32_t width, std::uint32_t height) {
+    auto const chunk = [](std::string& out, std::string const& type, std::string const& data) {
+        put_be32(out, std::uint32_t(data.size()));
+        out += type + data;
+        put_be32(out, crc32(type + data));
+    };
+    std::string png = "\x89PNG\r\n\x1a\n";
+    std::string ihdr;
+    put_be32(ihdr, width);
+    put_be32(ihdr, height);
+    ihdr += std::string("\x08\x06\x00\x00\x00", 5);
+    chunk(png, "IHDR", ihdr);
+    chunk(png, "IDAT", std::string("\x78\x9c\x63\x00\x00", 5));
+    chunk(png, "IEND", "");
+    return png;
+}
+
+std::string problem_of(auto&& f) {
+    try {
+        f();
+    } catch (canopy::scene_error const& e) {
+        return e.what();
+    } catch (canopy::image_error const& e) {
+        return e.what();
+    }
+    FAIL_CHECK("no error");
+    return {};
+}
+
+} // namespace
+
+TEST_CASE("an image whose header claims more than --max-texels texels is refused before decoding") {
+    temp_folder const tmp("canopy_texture_test");
+    fs::path const big = tmp.path / "big.png";
+    std::string const png = png_claiming(16384, 16384);
+    tmp.write("big.png", png);
+    CHECK(png.size() < 100);
+    std::string const expected =
+        "big.png: image is 16384 × 16384 (268435456 texels), over the limit of 67108864 texels (--max-texels)";
+    CHECK_THAT(problem_of([&] { (void)canopy::read_image(big); }), Catch::Contains(expected));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(big); }), Catch::Contains(expected));
+    canopy::registry r;
+    canopy::register_oiio_plugin(r);
+    CHECK_THAT(problem_of([&] { (void)r.load_image(big); }), Catch::Contains(expected));
+
+    // The limit is --max-texels: at it an image is read, one texel more is refused.
+    limits_guard const guard;
+    canopy::rgba_image two;
+    two.width = 2;
+    two.height = 1;
+    two.pixels = {1, 0, 0, 1, 0, 1, 0, 1};
+    canopy::write_image(tmp.path / "two.png", two);
+    canopy::default_limits().max_texels = 2;
+    auto const read = canopy::read_texture_image(tmp.path / "two.png");
+    REQUIRE(read.texels.size() == 2);
+    CHECK(read.texels[1].y == 1.0f);
+    CHECK(read.texels[1].w == 1.0f);
+    canopy::default_limits().max_texels = 1;
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "two.png"); }),
+               Catch::Contains("two.png: image is 2 × 1 (2 texels), over the limit of 1 texels (--max-texels)"));
+    canopy::default_limits().max_file_bytes = 20;
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "two.png"); }),
+               Catch::Contains("two.png: is ") && Catch::Contains("bytes, over the limit of 20 bytes per file (--max-file-bytes)"));
+}
+
+TEST_CASE("GIF, WebP and BMP headers are checked before OpenImageIO opens them (it decodes them as it opens)") {
+    temp_folder const tmp("canopy_texture_test");
+    auto const u16 = [](std::string& out, std::uint32_t v) { out += char(v & 0xFF), out += char(v >> 8 & 0xFF); };
+    auto const u32 = [&](std::string& out, std::uint32_t v) { u16(out, v & 0xFFFF), u16(out, v >> 16); };
+    // GIF: a 1 × 1 image on a 65535 × 65535 canvas (OpenImageIO fills the canvas: 16 GiB).
+    auto const gif = [&](std::uint32_t w, std::uint32_t h) {
+        std::string g = "GIF89a";
+        u16(g, w), u16(g, h);
+        g += std::string("\x80\x00\x00\x00\x00\x00\xff\xff\xff\x2c\x00\x00\x00\x00\x01\x00\x01\x00\x00\x02\x02\x44\x01\x00\x3b", 25);
+        return g;
+    };
+    tmp.write("big.gif", gif(65535, 65535));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.gif"); }),
+               Catch::Contains("big.gif: image is 65535 × 65535 (4294836225 texels), over the limit of 67108864 texels (--max-texels)"));
+    tmp.write("small.gif", gif(1, 1));
+    auto const small = canopy::read_texture_image(tmp.path / "small.gif");
+    CHECK(small.width == 1);
+    CHECK(small.height == 1);
+    // BMP, run-length encoded, 20000 × 20000 (OpenImageIO decodes it whole as it opens it).
+    std::string bmp = "BM";
+    u32(bmp, 66), u32(bmp, 0), u32(bmp, 62);
+    u32(bmp, 40), u32(bmp, 20000), u32(bmp, 20000);
+    u16(bmp, 1), u16(bmp, 8), u32(bmp, 1), u32(bmp, 4), u32(bmp, 2835), u32(bmp, 2835), u32(bmp, 2), u32(bmp, 0);
+    bmp += std::string("\x00\x00\x00\x00\xff\xff\xff\x00\x00\x01\x00\x00", 12);
+    tmp.write("big.bmp", bmp);
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.bmp"); }),
+               Catch::Contains("big.bmp: image is 20000 × 20000 (400000000 texels), over the limit"));
+    // WebP, lossless, 16383 × 16383.
+    std::string webp = "RIFF";
+    u32(webp, 4 + 8 + 69);
+    webp += "WEBPVP8L";
+    u32(webp, 69);
+    webp += '\x2f';
+    u32(webp, 16382u | 16382u << 14 | 1u << 28);
+    webp += std::string(64, '\0');
+    tmp.write("big.webp", webp);
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.webp"); }),
+               Catch::Contains("big.webp: image is 16383 × 16383 (268402689 texels), over the limit"));
+}
+
+TEST_CASE("a texture that is a device, a folder or not what its extension says is refused by name") {
+    temp_folder const tmp("canopy_texture_test");
+    fs::create_symlink("/dev/zero", tmp.path / "zero.png");
+    fs::create_directory(tmp.path / "folder.png");
+    CHECK_THAT(problem_of([&] { (void)canopy::read_image(tmp.path / "zero.png"); }),
+               Catch::Contains("zero.png: is a character device, not a regular file"));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "zero.png"); }),
+               Catch::Contains("zero.png: is a character device, not a regular file"));
+    canopy::registry r;
+    canopy::register_oiio_plugin(r);
+    CHECK_THAT(problem_of([&] { (void)r.load_image(tmp.path / "zero.png"); }),
+               Catch::Contains("zero.png: is a character device, not a regular file (texture)"));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "folder.png"); }),
+               Catch::Contains("folder.png: is a folder, not a regular file"));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "absent.png"); }),
+               Catch::Contains("absent.png: file not found"));
+
+    // A PPM named .png is read by the PNG reader only (no guessing among every format), and a
+    // PNG that claims no pixels is refused.
+    tmp.write("ppm.png", std::string("P6\n1 1\n255\n\x10\x20\x30", 14));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "ppm.png"); }),
+               Catch::Contains("ppm.png: cannot read image"));
+    tmp.write("empty.png", png_claiming(0, 5));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "empty.png"); }),
+               Catch::Contains("empty.png: cannot read image"));
+}
+
+TEST_CASE("texture files decode to RGBA: grey to RGB, missing alpha 1, 8-bit data marked sRGB") {
+    temp_folder const tmp("canopy_texture_test");
+    tmp.write("grey.pgm", std::string("P5\n2 1\n255\n\x00\xff", 13));
+    auto const grey = canopy::read_texture_image(tmp.path / "grey.pgm");
+    REQUIRE(grey.width == 2);
+    REQUIRE(grey.height == 1);
+    CHECK(grey.srgb);
+    CHECK(grey.texels[0].x == 0.0f);
+    CHECK(grey.texels[1].x == 1.0f);
+    CHECK(grey.texels[1].y == 1.0f);
+    CHECK(grey.texels[1].z == 1.0f);
+    CHECK(grey.texels[1].w == 1.0f);
+    tmp.write("rgb.ppm", std::string("P6\n1 2\n255\n\x33\x66\x99\xff\x00\x00", 17));
+    auto const rgb = canopy::read_image(tmp.path / "rgb.ppm");
+    REQUIRE(rgb.pixels.size() == 8);
+    CHECK(rgb.pixels[0] == Approx(51.0 / 255.0).epsilon(1e-6));
+    CHECK(rgb.pixels[1] == Approx(102.0 / 255.0).epsilon(1e-6));
+    CHECK(rgb.pixels[2] == Approx(153.0 / 255.0).epsilon(1e-6));
+    CHECK(rgb.pixels[3] == 1.0f);
+    CHECK(rgb.at(0, 1)[0] == 1.0f);
+    CHECK(rgb.at(0, 1)[3] == 1.0f);
 }

@@ -12,11 +12,18 @@ module;
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <limits>
+#include <new>
 #include <optional>
+#include <set>
 #include <string>
+#include <string_view>
+#include <system_error>
 #include <utility>
 #include <vector>
 #include <tiny_gltf.h>
+
+#include "gltf_schema.hpp"
 module canopy.plugins.gltf;
 import canopy.math;
 import canopy.scene;
@@ -27,16 +34,150 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// tinygltf's image callback: embedded images (data: URIs, buffer views) are decoded by tinygltf's
-// stb_image decoder; images referred to by uri are left undecoded and read later through the
-// registry's image loaders.
-bool decode_embedded_image(tinygltf::Image* image, int index, std::string* err, std::string* warn, int width,
-                           int height, unsigned char const* bytes, int size, void*) {
-    if (!image->uri.empty()) return true;
-    return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, nullptr);
+// A string from the file, quoted and cut to a short prefix.
+std::string shown(std::string_view s) {
+    constexpr std::size_t longest = 40;
+    return "'" + std::string(s.substr(0, longest)) + (s.size() > longest ? "…'" : "'");
 }
 
-// tinygltf's messages: lines joined with "; ", without the trailing newline.
+// What tinygltf may read besides the file itself, and what it was refused. tinygltf reads external
+// buffers and images through these callbacks: each file must be a regular file within
+// --max-file-bytes in the glTF file's folder (tinygltf would also look in the working folder);
+// images referred to by uri are not read here but later, through the registry's image loaders.
+struct file_access {
+    std::string base_dir;                 // as tinygltf joins uris to it
+    std::vector<std::string> buffer_paths; // buffers[i]'s file, as tinygltf names it ("" for data: URIs)
+    std::set<std::string> image_paths;    // images' files, as tinygltf names them
+    std::optional<scene_error> refused;   // the first file or embedded image refused
+    std::string refused_where;            // its element ("buffers[0]", "images[2]")
+    // Images that are another's bytes (the same buffer bytes, data: URI or file): not decoded
+    // again, but shared (image index → the first image of those bytes).
+    std::map<int, int> same_as;
+};
+
+// tinygltf's own path of a uri: dlib::urldecode ('+' is a space) joined to the base folder.
+std::string tinygltf_path(std::string const& base_dir, std::string const& uri) {
+    auto const hex = [](char c) {
+        if (c >= '0' && c <= '9') return c - '0';
+        if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+        if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+        return 0;
+    };
+    std::string decoded;
+    for (std::size_t i = 0; i < uri.size(); ++i) {
+        if (uri[i] == '+') {
+            decoded += ' ';
+        } else if (uri[i] == '%' && uri.size() > i + 2) {
+            decoded += char(hex(uri[i + 1]) << 4 | hex(uri[i + 2]));
+            i += 2;
+        } else {
+            decoded += uri[i];
+        }
+    }
+    if (base_dir.empty()) return decoded;
+    return base_dir.back() == '/' ? base_dir + decoded : base_dir + "/" + decoded;
+}
+
+bool file_exists(std::string const& path, void* user) {
+    auto const& access = *static_cast<file_access const*>(user);
+    if (!access.base_dir.empty() && !path.starts_with(access.base_dir)) return false;
+    std::error_code ec;
+    return fs::exists(path, ec);
+}
+
+std::string expand_file_path(std::string const& path, void*) { return path; }
+
+bool read_whole_file(std::vector<unsigned char>* out, std::string* err, std::string const& path, void* user) {
+    auto& access = *static_cast<file_access*>(user);
+    if (access.image_paths.contains(path)) {
+        *err = "read later through the image loaders";
+        return false;
+    }
+    std::string where = "buffers";
+    for (std::size_t i = 0; i < access.buffer_paths.size(); ++i)
+        if (access.buffer_paths[i] == path) where = "buffers[" + std::to_string(i) + "]";
+    try {
+        std::uint64_t const size = require_regular_file(path, default_limits().max_file_bytes, "buffer");
+        out->resize(std::size_t(size));
+        std::ifstream in(path, std::ios::binary);
+        in.read(reinterpret_cast<char*>(out->data()), std::streamsize(size));
+        if (!in || std::uint64_t(in.gcount()) != size) throw scene_error(path, "", "cannot be read (buffer)");
+        return true;
+    } catch (scene_error const& e) {
+        if (!access.refused) access.refused = e, access.refused_where = where;
+    } catch (std::bad_alloc const&) {
+        if (!access.refused) access.refused = scene_error(path, "", "out of memory while reading it (buffer)"), access.refused_where = where;
+    }
+    *err = access.refused->what();
+    return false;
+}
+
+bool write_whole_file(std::string* err, std::string const&, std::vector<unsigned char> const&, void*) {
+    *err = "not written";
+    return false;
+}
+
+// Width and height from a PNG or JPEG header (the formats glTF allows for images), without
+// decoding; nullopt for any other data.
+std::optional<std::pair<std::uint32_t, std::uint32_t>> image_size(unsigned char const* p, std::size_t n) {
+    auto const be16 = [&](std::size_t i) { return std::uint32_t(p[i]) << 8 | p[i + 1]; };
+    auto const be32 = [&](std::size_t i) { return be16(i) << 16 | be16(i + 2); };
+    static constexpr unsigned char png[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    if (n >= 24 && std::memcmp(p, png, 8) == 0 && std::memcmp(p + 12, "IHDR", 4) == 0) return std::pair(be32(16), be32(20));
+    if (n < 4 || p[0] != 0xFF || p[1] != 0xD8) return std::nullopt;
+    // JPEG: the first start-of-frame segment (SOF0 to SOF15 but DHT, JPG and DAC) holds the size.
+    std::size_t i = 2;
+    while (i + 3 < n) {
+        if (p[i] != 0xFF) return std::nullopt;
+        unsigned char const marker = p[i + 1];
+        if (marker == 0xFF) {
+            ++i;
+            continue;
+        }
+        if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD9)) {
+            i += 2;
+            continue;
+        }
+        std::size_t const length = be16(i + 2);
+        bool const frame = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+        if (frame) return i + 8 < n ? std::optional(std::pair(be16(i + 7), be16(i + 5))) : std::nullopt;
+        if (length < 2) return std::nullopt;
+        i += 2 + length;
+    }
+    return std::nullopt;
+}
+
+// tinygltf's image callback: embedded images (data: URIs, buffer views) are checked by their
+// header (PNG or JPEG, at most --max-texels texels) and decoded by tinygltf's stb_image decoder;
+// images referred to by uri are left undecoded and read later through the registry's image loaders.
+bool decode_embedded_image(tinygltf::Image* image, int index, std::string* err, std::string* warn, int width,
+                           int height, unsigned char const* bytes, int size, void* user) {
+    if (!image->uri.empty()) return true;
+    auto& access = *static_cast<file_access*>(user);
+    if (access.same_as.contains(index)) return true;
+    std::string const where = "images[" + std::to_string(index) + "]";
+    auto const refuse = [&](std::string const& problem) {
+        if (!access.refused) access.refused = scene_error("", "", problem), access.refused_where = where;
+        *err = problem;
+        return false;
+    };
+    auto const dimensions = image_size(bytes, size < 0 ? 0 : std::size_t(size));
+    if (!dimensions) return refuse("embedded image is neither PNG nor JPEG");
+    auto const [w, h] = *dimensions;
+    std::uint64_t const texels = std::uint64_t(w) * h;
+    if (w == 0 || h == 0) return refuse("embedded image has no pixels (" + std::to_string(w) + " × " + std::to_string(h) + ")");
+    if (texels > default_limits().max_texels || w > (1u << 24) || h > (1u << 24))
+        return refuse("embedded image is " + std::to_string(w) + " × " + std::to_string(h) + " (" + std::to_string(texels) +
+                      " texels), over the limit of " + std::to_string(default_limits().max_texels) + " texels (--max-texels)");
+    try {
+        return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, nullptr);
+    } catch (std::bad_alloc const&) {
+        return refuse("out of memory while decoding the embedded image");
+    }
+}
+
+// tinygltf's messages: lines joined with "; ", without the trailing newline, each cut to a
+// short prefix (tinygltf quotes whole data: URIs).
 std::string tidy(std::string const& message) {
     std::string out;
     std::size_t start = 0;
@@ -45,6 +186,8 @@ std::string tidy(std::string const& message) {
         if (end == std::string::npos) end = message.size();
         std::string line = message.substr(start, end - start);
         while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+        constexpr std::size_t longest = 160;
+        if (line.size() > longest) line = line.substr(0, longest) + "…";
         if (!line.empty()) out += (out.empty() ? "" : "; ") + line;
         start = end + 1;
     }
@@ -138,14 +281,26 @@ std::string index_name(char const* array, T i) {
 // The conversion of one loaded model into a scene.
 class converter {
 public:
-    converter(tinygltf::Model const& model, fs::path const& file, scene& s, registry const& r)
-        : model_(model), file_(file), name_(file.string()), s_(s), r_(r),
-          materials_(model.materials.size()), meshes_(model.meshes.size()) {}
+    converter(tinygltf::Model const& model, fs::path const& file, scene& s, registry const& r,
+              std::map<int, int> const& same_as)
+        : model_(model), file_(file), name_(file.string()), s_(s), r_(r), same_as_(same_as),
+          materials_(model.materials.size()), meshes_(model.meshes.size()) {
+        for (auto const& m : s.meshes()) {
+            held_vertices_ += m.positions.size();
+            held_triangles_ += m.triangles.size();
+        }
+    }
 
     node_id run(node_id parent) {
         for (auto const& ext : model_.extensionsRequired)
-            fail("extensionsRequired", "the file requires extension " + ext + ", which this loader does not support");
+            fail("extensionsRequired", "the file requires extension " + shown(ext) + ", which this loader does not support");
 
+        // The schema check has made the nodes disjoint trees (one parent each, no cycle) no
+        // deeper than max_depth, and each scene's nodes roots.
+        std::vector<bool> is_child(model_.nodes.size(), false);
+        for (auto const& n : model_.nodes)
+            for (int c : n.children)
+                if (c >= 0 && std::size_t(c) < is_child.size()) is_child[std::size_t(c)] = true;
         std::vector<int> roots;
         std::string roots_where;
         if (!model_.scenes.empty()) {
@@ -154,17 +309,11 @@ public:
                 fail("scene", "scene " + std::to_string(chosen) + " does not exist (" +
                                   std::to_string(model_.scenes.size()) + " scenes)");
             roots = model_.scenes[std::size_t(chosen)].nodes;
-            roots_where = index_name("scenes", chosen);
+            roots_where = index_name("scenes", chosen) + ".nodes";
         } else {
             // No scene: every node that is no node's child.
-            std::vector<bool> is_child(model_.nodes.size(), false);
-            for (std::size_t n = 0; n < model_.nodes.size(); ++n)
-                for (int c : model_.nodes[n].children)
-                    if (c >= 0 && std::size_t(c) < model_.nodes.size()) is_child[std::size_t(c)] = true;
             for (std::size_t n = 0; n < model_.nodes.size(); ++n)
                 if (!is_child[n]) roots.push_back(int(n));
-            if (roots.empty() && !model_.nodes.empty())
-                fail("nodes", "the file has no scene and every node is another node's child (a cycle)");
             roots_where = "nodes";
         }
 
@@ -188,8 +337,7 @@ public:
             pending const p = stack.back();
             stack.pop_back();
             std::string const where = index_name("nodes", p.node);
-            if (visited[std::size_t(p.node)])
-                fail(where, "is reached twice (it is the child of two nodes, listed twice, or on a cycle)");
+            if (visited[std::size_t(p.node)]) fail(where, "is reached twice (it is listed twice)");
             visited[std::size_t(p.node)] = true;
             tinygltf::Node const& n = model_.nodes[std::size_t(p.node)];
             std::string const name = n.name.empty() ? where : n.name;
@@ -266,14 +414,22 @@ private:
             xf.linear = linear;
             if (!n.translation.empty()) xf.translation = vec3<double>(n.translation[0], n.translation[1], n.translation[2]);
         }
-        return {{vec3<float>(xf.linear.col0), vec3<float>(xf.linear.col1), vec3<float>(xf.linear.col2)},
-                vec3<float>(xf.translation)};
+        affine_transform<float> const out{{vec3<float>(xf.linear.col0), vec3<float>(xf.linear.col1), vec3<float>(xf.linear.col2)},
+                                          vec3<float>(xf.translation)};
+        for (auto const& v : {out.linear.col0, out.linear.col1, out.linear.col2, out.translation})
+            if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+                fail(where, "transform has a value beyond the range of a float");
+        return out;
     }
 
     void place_mesh(int mesh, node_id under, std::string const& where, std::string const& name) {
         if (mesh < 0 || std::size_t(mesh) >= model_.meshes.size())
             fail(where, "mesh " + std::to_string(mesh) + " does not exist (" + std::to_string(model_.meshes.size()) +
                             " meshes)");
+        // Each placed primitive is a mesh node, placed once by compile(): held to --max-placements
+        // as they are made (a mesh of many primitives on many nodes multiplies).
+        placements_ += model_.meshes[std::size_t(mesh)].primitives.size();
+        check_limit(name_, where, placements_, default_limits().max_placements, "mesh placements", "--max-placements");
         std::vector<std::uint32_t> const& prims = mesh_of(mesh);
         if (prims.size() == 1) {
             s_.add_mesh_node(under, prims[0], name + " (mesh)");
@@ -454,6 +610,13 @@ private:
         // Positions.
         int const position = accessor_index(p.attributes, "POSITION", where);
         if (position < 0) fail(where, "has no POSITION attribute");
+        // The scene's meshes together (those already in it, and this file's) are held to
+        // --max-triangles, vertices and triangles, before anything is read: primitives of one
+        // file may share one large accessor.
+        resource_limits const& limits = default_limits();
+        std::uint64_t const declared = model_.accessors[std::size_t(position)].count;
+        check_limit(name_, where, held_vertices_ + declared, limits.max_triangles, "vertices in the scene's meshes",
+                    "--max-triangles");
         std::vector<double> const xyz = read_attribute(position, "POSITION", 3, false, std::size_t(-1), where);
         std::size_t const vertices = xyz.size() / 3;
         if (vertices > std::size_t(UINT32_MAX)) fail(where, "has more than 2^32 - 1 vertices");
@@ -470,6 +633,8 @@ private:
                 fail(where, what + ": component type " + std::to_string(type) +
                                 " is not allowed (unsigned byte, short or int needed)");
             std::size_t count = 0;
+            check_limit(name_, where, model_.accessors[std::size_t(p.indices)].count, 3 * limits.max_triangles, "indices",
+                        "--max-triangles");
             std::vector<double> const raw = read_accessor(p.indices, 1, where, what, count);
             indices.reserve(raw.size());
             for (std::size_t k = 0; k < raw.size(); ++k) {
@@ -489,6 +654,11 @@ private:
         std::string const mesh_name = m.name.empty() ? index_name("meshes", mesh) : m.name;
         md.name = m.primitives.size() == 1 ? mesh_name : mesh_name + "." + index_name("primitives", index);
         std::size_t const n = indices.size();
+        std::uint64_t const triangles = p.mode == TINYGLTF_MODE_TRIANGLES ? n / 3 : n < 3 ? 0 : n - 2;
+        check_limit(name_, where, held_triangles_ + triangles, limits.max_triangles, "triangles in the scene's meshes",
+                    "--max-triangles");
+        held_vertices_ += vertices;
+        held_triangles_ += triangles;
         if (p.mode == TINYGLTF_MODE_TRIANGLES) {
             if (n % 3 != 0) fail(where, "has " + std::to_string(n) + " vertices in TRIANGLES mode (not a multiple of 3)");
             for (std::size_t k = 0; k < n; k += 3) md.triangles.push_back({indices[k], indices[k + 1], indices[k + 2]});
@@ -597,8 +767,16 @@ private:
                 fail(index_name("textures", texture), "has no image source this loader reads (source " +
                                                           std::to_string(source) + ", " +
                                                           std::to_string(model_.images.size()) + " images)");
-            // The factor's alpha multiplies the texture's: masks compare the product.
-            md.image = image(source, masked ? factor[3] : 1.0);
+            // The factor's alpha multiplies the texture's, and a mask compares the product with
+            // the cutoff: the texture's alpha is compared with cutoff / factor instead, so that
+            // one image serves every material; below the cutoff, a factor leaves only holes.
+            double const alpha = masked ? factor[3] : 1.0;
+            if (alpha < md.alpha_cutoff) {
+                md.image = image(-1, 0.0);
+            } else {
+                md.image = image(source, 1.0);
+                if (alpha > 0.0 && alpha < 1.0) md.alpha_cutoff = float(double(md.alpha_cutoff) / alpha);
+            }
         } else if (masked) {
             // No texture: the factor's alpha alone decides, through a 1×1 image.
             md.image = image(-1, factor[3]);
@@ -609,22 +787,29 @@ private:
     }
 
     // Scene image of glTF image `index` with alpha scaled by `alpha` (index -1: one white texel).
+    // Scene image of glTF image `index`, made once however many materials use it (and once for
+    // all glTF images of the same bytes or file); index -1: one white texel of alpha `alpha`.
     int image(int index, double alpha) {
-        auto const key = std::make_pair(index, alpha);
+        if (auto it = same_as_.find(index); it != same_as_.end()) index = it->second;
+        auto const key = std::make_pair(index, index < 0 ? alpha : 1.0);
         if (auto it = images_.find(key); it != images_.end()) return it->second;
+        std::optional<fs::path> file;
+        if (index >= 0 && !model_.images[std::size_t(index)].uri.empty()) {
+            file = file_.parent_path() / decode_uri(model_.images[std::size_t(index)].uri);
+            if (auto it = image_files_.find(*file); it != image_files_.end()) return images_[key] = it->second;
+        }
         image_data img;
         if (index < 0) {
             img.source = name_;
             img.width = img.height = 1;
-            img.texels = {vec4<float>(1.0f, 1.0f, 1.0f, 1.0f)};
+            img.texels = {vec4<float>(1.0f, 1.0f, 1.0f, float(alpha))};
         } else {
             img = decoded_image(index);
         }
-        if (alpha != 1.0)
-            for (auto& t : img.texels) t.w = float(double(t.w) * alpha);
         std::string const where = index < 0 ? std::string("materials") : index_name("images", index);
         int const id = guarded(where, [&] { return s_.add_image(std::move(img)); });
         images_.emplace(key, id);
+        if (file) image_files_.emplace(*file, id);
         return id;
     }
 
@@ -634,11 +819,13 @@ private:
         tinygltf::Image const& im = model_.images[std::size_t(index)];
         image_data out;
         if (!im.uri.empty()) {
+            if (im.uri.starts_with("data:"))
+                fail(where, "data: URI " + shown(im.uri) + " is not one tinygltf decodes (PNG or JPEG, base64)");
             fs::path const path = file_.parent_path() / decode_uri(im.uri);
             try {
                 out = r_.load_image(path);
             } catch (scene_error const& e) {
-                fail(where, "'" + im.uri + "': " + e.what());
+                fail(where, shown(im.uri) + ": " + e.what());
             }
             // baseColorTexture is sRGB by the glTF specification, whatever the file's tags.
             for (auto& t : out.texels) t = vec4<float>(srgb_to_linear(t.x), srgb_to_linear(t.y), srgb_to_linear(t.z), t.w);
@@ -686,45 +873,140 @@ private:
     std::string name_;
     scene& s_;
     registry const& r_;
+    std::map<int, int> const& same_as_;
     std::vector<std::optional<int>> materials_;
     std::vector<std::optional<std::vector<std::uint32_t>>> meshes_;
+    std::uint64_t held_vertices_ = 0, held_triangles_ = 0; // in the scene's meshes, this file's included
+    std::uint64_t placements_ = 0;                         // mesh nodes this file made
     std::map<std::pair<int, double>, int> images_;
+    std::map<fs::path, int> image_files_;
 };
 
-bool is_binary_gltf(fs::path const& file) {
-    std::ifstream in(file, std::ios::binary);
-    char magic[4] = {};
-    in.read(magic, 4);
-    return in.gcount() == 4 && std::memcmp(magic, "glTF", 4) == 0;
+// The JSON chunk of a .glb file, after checking its layout (glTF 2.0, §4.4: a 12-byte header,
+// a JSON chunk, an optional BIN chunk, each chunk's 8-byte header included in the length).
+std::string_view glb_json(std::string_view bytes, std::string const& name) {
+    auto const u32 = [&](std::size_t i) {
+        std::uint32_t v = 0;
+        for (std::size_t k = 0; k < 4; ++k) v |= std::uint32_t(static_cast<unsigned char>(bytes[i + k])) << (8 * k);
+        return std::uint64_t(v);
+    };
+    auto const fail = [&](std::string const& problem) { throw scene_error(name, "", "not a valid .glb file: " + problem); };
+    if (bytes.size() < 20) fail("shorter than its 20-byte header");
+    if (u32(4) != 2) fail("container version " + std::to_string(u32(4)) + " (2 needed)");
+    std::uint64_t const length = u32(8), json_length = u32(12);
+    if (length > bytes.size())
+        fail("its header declares " + std::to_string(length) + " bytes, the file has " + std::to_string(bytes.size()));
+    if (bytes.substr(16, 4) != "JSON") fail("its first chunk is not JSON");
+    if (json_length == 0 || 20 + json_length > length)
+        fail("its JSON chunk of " + std::to_string(json_length) + " bytes does not fit in " + std::to_string(length) + " bytes");
+    std::uint64_t const bin = 20 + json_length;
+    if (bin < length) {
+        if (bin + 8 > length) fail("its BIN chunk header does not fit");
+        std::uint64_t const bin_length = u32(bin);
+        if (bytes.substr(bin + 4, 4) != std::string_view("BIN\0", 4)) fail("its second chunk is not BIN");
+        if (bin_length < 4 || bin_length % 4 != 0 || bin + 8 + bin_length > length)
+            fail("its BIN chunk of " + std::to_string(bin_length) + " bytes does not fit in " + std::to_string(length) + " bytes");
+    }
+    return bytes.substr(20, json_length);
 }
 
-} // namespace
+node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id parent, registry const& r) {
+    std::string const name = file.string();
+    if (bytes.size() > std::numeric_limits<unsigned int>::max())
+        throw scene_error(name, "", "is " + std::to_string(bytes.size()) + " bytes, more than tinygltf reads (4 GiB)");
+    bool const binary = bytes.size() >= 4 && bytes.substr(0, 4) == "glTF";
+    std::string_view const json = binary ? glb_json(bytes, name) : bytes;
+    gltf_schema::document_uris const uris = gltf_schema::check_document(json, name, default_limits().max_depth);
 
-node_id load_gltf(scene& s, fs::path const& file, node_id parent, registry const& r) {
-    std::error_code ec;
-    if (!fs::is_regular_file(file, ec)) throw scene_error(file.string(), "", "no such file");
+    // The files tinygltf will ask for, as it names them.
+    file_access access;
+    access.base_dir = file.parent_path().string();
+    for (auto const& uri : uris.buffers)
+        access.buffer_paths.push_back(uri.empty() || uri.starts_with("data:") ? "" : tinygltf_path(access.base_dir, uri));
+    for (auto const& uri : uris.images)
+        if (!uri.empty() && !uri.starts_with("data:")) access.image_paths.insert(tinygltf_path(access.base_dir, uri));
+    for (auto const& b : access.buffer_paths) access.image_paths.erase(b);
+    {
+        // Images of the same bytes: decoded and held once.
+        std::map<std::array<std::int64_t, 3>, int> by_bytes;
+        std::map<std::string_view, int> by_uri;
+        for (std::size_t i = 0; i < uris.images.size(); ++i) {
+            int const first = uris.images[i].empty() ? by_bytes.try_emplace(uris.image_bytes[i], int(i)).first->second
+                                                     : by_uri.try_emplace(uris.images[i], int(i)).first->second;
+            if (first != int(i)) access.same_as[int(i)] = first;
+        }
+    }
+    // External buffers: there, regular files within the size limit, of their declared length.
+    for (std::size_t i = 0; i < access.buffer_paths.size(); ++i) {
+        std::string const& path = access.buffer_paths[i];
+        if (path.empty()) continue;
+        std::string const where = "buffers[" + std::to_string(i) + "]";
+        std::uint64_t size = 0;
+        try {
+            size = require_regular_file(path, default_limits().max_file_bytes, "buffer");
+        } catch (scene_error const& e) {
+            throw scene_error(name, where, e.what());
+        }
+        if (size != uris.buffer_lengths[i])
+            throw scene_error(name, where, path + ": has " + std::to_string(size) + " bytes, its byteLength says " +
+                                               std::to_string(uris.buffer_lengths[i]));
+    }
+
     tinygltf::Model model;
     std::string err, warn;
     bool loaded = false;
     try {
         tinygltf::TinyGLTF loader;
-        loader.SetImageLoader(decode_embedded_image, nullptr);
-        loaded = is_binary_gltf(file) ? loader.LoadBinaryFromFile(&model, &err, &warn, file.string())
-                                      : loader.LoadASCIIFromFile(&model, &err, &warn, file.string());
+        loader.SetImageLoader(decode_embedded_image, &access);
+        loader.SetFsCallbacks({file_exists, expand_file_path, read_whole_file, write_whole_file, &access});
+        auto const* data = reinterpret_cast<unsigned char const*>(bytes.data());
+        auto const size = static_cast<unsigned int>(bytes.size());
+        loaded = binary ? loader.LoadBinaryFromMemory(&model, &err, &warn, data, size, access.base_dir)
+                        : loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(), size, access.base_dir);
+    } catch (std::bad_alloc const&) {
+        throw;
     } catch (std::exception const& e) {
-        throw scene_error(file.string(), "", std::string("tinygltf: ") + e.what());
+        throw scene_error(name, "", "tinygltf: " + tidy(e.what()));
     }
-    if (!loaded) throw scene_error(file.string(), "", tidy(err.empty() ? warn : err));
+    if (access.refused) {
+        std::string const problem = access.refused->file().empty() ? access.refused->problem() : access.refused->what();
+        throw scene_error(name, access.refused_where, problem);
+    }
+    if (!loaded) throw scene_error(name, "", tidy(err.empty() ? warn : err));
     if (!model.asset.version.starts_with("2"))
-        throw scene_error(file.string(), "asset.version",
-                          "glTF '" + model.asset.version + "' is not supported (this loader reads glTF 2.0)");
+        throw scene_error(name, "asset.version",
+                          "glTF " + shown(model.asset.version) + " is not supported (this loader reads glTF 2.0)");
     scene::mark const mark = s.make_mark();
     try {
-        return converter(model, file, s, r).run(parent);
+        return converter(model, file, s, r, access.same_as).run(parent);
     } catch (...) {
         s.roll_back(mark);
         throw;
     }
+}
+
+} // namespace
+
+node_id parse_gltf(std::string_view bytes, fs::path const& file, scene& s, node_id parent, registry const& r) {
+    try {
+        return parse(bytes, file, s, parent, r);
+    } catch (std::bad_alloc const&) {
+        throw scene_error(file.string(), "", "out of memory while loading");
+    }
+}
+
+node_id load_gltf(scene& s, fs::path const& file, node_id parent, registry const& r) {
+    std::string bytes;
+    try {
+        std::uint64_t const size = require_regular_file(file);
+        bytes.resize(std::size_t(size));
+        std::ifstream in(file, std::ios::binary);
+        in.read(bytes.data(), std::streamsize(size));
+        if (!in || std::uint64_t(in.gcount()) != size) throw scene_error(file.string(), "", "cannot be read");
+    } catch (std::bad_alloc const&) {
+        throw scene_error(file.string(), "", "out of memory while reading the file");
+    }
+    return parse_gltf(bytes, file, s, parent, r);
 }
 
 void register_gltf_plugin(registry& r) {

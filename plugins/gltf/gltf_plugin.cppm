@@ -22,6 +22,9 @@
 //               alphaMode MASK (alphaCutoff, default 0.5) → alpha_mode::mask; BLEND is treated
 //               as MASK with cutoff 0.5 (ray queries see a surface or a hole, never a fraction);
 //               a masked material without a texture masks by its factor's alpha (a 1×1 image).
+//               A mask compares texture alpha × factor alpha with the cutoff, that is texture
+//               alpha with cutoff / factor: each image is decoded and held once, however many
+//               materials use it (and once for all glTF images of the same bytes or file).
 //   cameras     perspective: eye at the node's origin, looking down the node's −Z, up +Y,
 //               fovy = yfov (aspect ratio and clip planes are not used)
 // Ignored: skins and morph targets (the meshes are loaded in their base pose), animations,
@@ -31,11 +34,23 @@
 //
 // Parameters: none. Errors (scene_error) name the file and the element, as
 //   "scene.gltf: meshes[2].primitives[0]: index 7 at position 5 is out of range (4 vertices)"
-// and cover missing files, malformed JSON, missing buffers and images, accessors out of their
-// buffer view, indices out of range, NaN or infinite values, out-of-range references between
-// elements, unsupported modes and component types, and node cycles.
+//   "model.gltf: materials[0].pbrMetallicRoughness: expected an object, got an array"
+// Nothing is dropped or guessed: before tinygltf reads the JSON, every property of the glTF 2.0
+// core schema is checked (its JSON type, its range or allowed values, the element an index refers
+// to, accessors and buffer views inside their buffer views and buffers, without overflow), so a
+// texture index of -1 or an object where an array belongs is refused with its JSON path, not
+// ignored. Also refused: malformed JSON or .glb layout, JSON nested deeper than --max-depth (at
+// most 512), missing buffers and images, files that are not regular files or are over
+// --max-file-bytes (external buffers and images included; a file is looked for in the glTF file's
+// folder only), embedded images that are not PNG or JPEG or whose header claims more than
+// --max-texels texels (checked before decoding), meshes over --max-triangles (the scene's meshes
+// together, checked before a primitive is read), mesh placements over --max-placements, indices out of
+// range, NaN or infinite values, values beyond the float range, unsupported modes and component
+// types, a node with two parents, a node that is its own descendant (the message lists the
+// cycle), and node hierarchies deeper than --max-depth (walked without recursion).
 module;
 #include <filesystem>
+#include <string_view>
 export module canopy.plugins.gltf;
 import canopy.scene;
 
@@ -44,6 +59,11 @@ export namespace canopy {
 // Loads a .gltf or .glb file under `parent`; returns the group it made. Images referred to by
 // uri are read through `r`'s image loaders.
 node_id load_gltf(scene& s, std::filesystem::path const& file, node_id parent, registry const& r);
+
+// The same from the file's bytes (.gltf JSON text, or .glb); `file` names it in messages and
+// locates its external buffers and images.
+node_id parse_gltf(std::string_view bytes, std::filesystem::path const& file, scene& s, node_id parent,
+                   registry const& r);
 
 void register_gltf_plugin(registry& r);
 

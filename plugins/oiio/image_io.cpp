@@ -1,69 +1,174 @@
 // Implementation of canopy.image_io on OpenImageIO 2.4.
 module;
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <limits>
 #include <memory>
+#include <new>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 module canopy.image_io;
+import canopy.scene;
 
 namespace canopy {
 
 namespace {
+
 [[noreturn]] void fail(std::filesystem::path const& path, std::string const& what) {
-    throw image_error(path.string() + ": " + what);
+    throw image_error(path.string(), what);
+}
+
+// OpenImageIO's message, on one line and at most a few hundred characters.
+std::string reason(std::string message) {
+    std::replace(message.begin(), message.end(), '\n', ' ');
+    while (!message.empty() && message.back() == ' ') message.pop_back();
+    constexpr std::size_t longest = 200;
+    if (message.size() > longest) message = message.substr(0, longest) + "…";
+    return message.empty() ? std::string("no reason given") : message;
 }
 
 // The reason of the last failed system call.
 std::string os_reason() { return errno != 0 ? std::strerror(errno) : "unknown error"; }
+
+std::string size_text(std::int64_t width, std::int64_t height) {
+    return std::to_string(width) + " × " + std::to_string(height);
+}
+
+// Width and height from the header of a GIF, WebP or BMP file: OpenImageIO's readers of these
+// formats allocate (and fill) the whole image when they open the file (GIF: its canvas; WebP:
+// the decoded image; BMP: an RLE image), before its size can be checked. nullopt for other
+// formats and for headers not understood here (OpenImageIO then reports them).
+std::optional<std::pair<std::uint64_t, std::uint64_t>> size_before_open(std::filesystem::path const& path,
+                                                                        std::string const& extension) {
+    if (extension != "gif" && extension != "webp" && extension != "bmp") return std::nullopt;
+    unsigned char b[32] = {};
+    std::ifstream in(path, std::ios::binary);
+    in.read(reinterpret_cast<char*>(b), sizeof b);
+    std::size_t const n = std::size_t(in.gcount());
+    auto const le16 = [&](std::size_t i) { return std::uint64_t(b[i]) | std::uint64_t(b[i + 1]) << 8; };
+    auto const le24 = [&](std::size_t i) { return le16(i) | std::uint64_t(b[i + 2]) << 16; };
+    auto const le32 = [&](std::size_t i) { return le16(i) | le16(i + 2) << 16; };
+    if (n >= 10 && std::memcmp(b, "GIF8", 4) == 0) return std::pair(le16(6), le16(8));
+    if (n >= 26 && b[0] == 'B' && b[1] == 'M') {
+        if (le32(14) == 12) return std::pair(le16(18), le16(20));
+        auto const magnitude = [](std::uint64_t v) { return v >= 0x80000000u ? 0x100000000u - v : v; };
+        return std::pair(magnitude(le32(18)), magnitude(le32(22)));
+    }
+    if (n >= 30 && std::memcmp(b, "RIFF", 4) == 0 && std::memcmp(b + 8, "WEBP", 4) == 0) {
+        if (std::memcmp(b + 12, "VP8X", 4) == 0) return std::pair(le24(24) + 1, le24(27) + 1);
+        if (std::memcmp(b + 12, "VP8L", 4) == 0 && b[20] == 0x2f) {
+            std::uint64_t const bits = le32(21);
+            return std::pair((bits & 0x3fff) + 1, (bits >> 14 & 0x3fff) + 1);
+        }
+        if (std::memcmp(b + 12, "VP8 ", 4) == 0) return std::pair(le16(26) & 0x3fff, le16(28) & 0x3fff);
+    }
+    return std::nullopt;
+}
+
+void check_texels(std::filesystem::path const& path, std::uint64_t width, std::uint64_t height,
+                  image_read_limits const& limits) {
+    std::uint64_t const texels = width * height;
+    if (texels > limits.max_texels)
+        fail(path, "image is " + size_text(std::int64_t(width), std::int64_t(height)) + " (" + std::to_string(texels) +
+                       " texels), over the limit of " + std::to_string(limits.max_texels) + " texels (--max-texels)");
+}
+
 } // namespace
 
-rgba_image read_image(std::filesystem::path const& path) {
-    if (!std::filesystem::exists(path)) fail(path, "no such file");
-    auto in = OIIO::ImageInput::open(path.string());
-    if (!in) fail(path, "cannot read image: " + OIIO::geterror());
-    OIIO::ImageSpec const& spec = in->spec();
-    if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) fail(path, "empty image");
-    if (spec.depth > 1) fail(path, "volume images are not supported");
-    int const channels = spec.nchannels;
-    std::vector<float> data(std::size_t(spec.width) * std::size_t(spec.height) * std::size_t(channels));
-    if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, data.data()))
-        fail(path, "cannot read pixels: " + in->geterror());
-    in->close();
+image_read_limits default_image_read_limits() {
+    return {default_limits().max_file_bytes, default_limits().max_texels};
+}
 
-    rgba_image image;
+void read_image_into(std::filesystem::path const& path, image_read_limits const& limits,
+                     std::function<float*(image_header const&)> const& allocate) {
+    try {
+        require_regular_file(path, limits.max_file_bytes);
+    } catch (scene_error const& e) {
+        fail(path, e.problem());
+    }
+    // The reader of the file's extension only: given a file name, OpenImageIO tries every format
+    // it knows on a file its extension's reader refuses; given the extension, it makes that reader.
+    std::string extension = path.extension().string();
+    if (!extension.empty()) extension.erase(0, 1);
+    for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (auto const size = size_before_open(path, extension)) check_texels(path, size->first, size->second, limits);
+    auto in = extension.empty() ? nullptr : OIIO::ImageInput::create(extension, false);
+    if (!in) fail(path, "no image reader for this file type (" + (extension.empty() ? std::string("no extension") : "'." + extension + "'") + ")");
+    OIIO::ImageSpec spec;
+    if (!in->open(path.string(), spec)) fail(path, "cannot read image: " + reason(in->geterror()));
+
+    // The header, checked before anything is allocated for the pixels.
+    if (spec.deep) fail(path, "deep images are not supported");
+    if (spec.depth > 1) fail(path, "volume images are not supported");
+    if (spec.width <= 0 || spec.height <= 0) fail(path, "image has no pixels (" + size_text(spec.width, spec.height) + ")");
+    if (spec.nchannels <= 0) fail(path, "image has no channels");
+    std::uint64_t const texels = std::uint64_t(spec.width) * std::uint64_t(spec.height);
+    check_texels(path, std::uint64_t(spec.width), std::uint64_t(spec.height), limits);
+    if (texels > std::numeric_limits<std::size_t>::max() / (4 * sizeof(float)))
+        fail(path, "image is " + size_text(spec.width, spec.height) + ", too large to address");
+
     // Integer pixel data is sRGB by convention (PNG, JPEG, 8-bit TIFF, ...) unless the file says
     // otherwise; float data (EXR, HDR) is linear.
+    image_header header;
+    header.width = spec.width;
+    header.height = spec.height;
     bool const integer = spec.format.basetype == OIIO::TypeDesc::UINT8 || spec.format.basetype == OIIO::TypeDesc::UINT16;
     std::string const space = spec.get_string_attribute("oiio:ColorSpace");
-    image.srgb = integer && space != "Linear" && space != "linear";
-    image.width = spec.width;
-    image.height = spec.height;
-    image.pixels.resize(4 * std::size_t(spec.width) * std::size_t(spec.height));
-    for (std::size_t i = 0, n = std::size_t(spec.width) * std::size_t(spec.height); i < n; ++i) {
-        float const* src = data.data() + i * std::size_t(channels);
-        float* dst = image.pixels.data() + 4 * i;
-        if (channels >= 3) {
-            dst[0] = src[0], dst[1] = src[1], dst[2] = src[2];
-        } else {
-            dst[0] = dst[1] = dst[2] = src[0];
+    header.srgb = integer && space != "Linear" && space != "linear";
+
+    try {
+        float* const pixels = allocate(header);
+        // The first four channels at most, each texel 4 floats apart; then grey → RGB and the
+        // missing alpha → 1.
+        int const channels = std::min(spec.nchannels, 4);
+        if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, pixels, OIIO::stride_t(4 * sizeof(float))))
+            fail(path, "cannot read pixels: " + reason(in->geterror()));
+        for (std::size_t i = 0; i < std::size_t(texels); ++i) {
+            float* p = pixels + 4 * i;
+            if (channels < 3) {
+                float const alpha = channels == 2 ? p[1] : 1.0f;
+                p[1] = p[2] = p[0];
+                p[3] = alpha;
+            } else if (channels == 3) {
+                p[3] = 1.0f;
+            }
         }
-        dst[3] = channels == 4 ? src[3] : channels == 2 ? src[1] : 1.0f;
+    } catch (std::bad_alloc const&) {
+        fail(path, "out of memory for an image of " + size_text(spec.width, spec.height) + " texels");
     }
+    in->close();
+}
+
+rgba_image read_image(std::filesystem::path const& path, image_read_limits const& limits) {
+    rgba_image image;
+    read_image_into(path, limits, [&](image_header const& h) {
+        image.width = h.width;
+        image.height = h.height;
+        image.srgb = h.srgb;
+        image.pixels.resize(4 * std::size_t(h.width) * std::size_t(h.height));
+        return image.pixels.data();
+    });
     return image;
 }
+
+rgba_image read_image(std::filesystem::path const& path) { return read_image(path, default_image_read_limits()); }
 
 void write_image(std::filesystem::path const& path, rgba_image const& image) {
     if (image.width <= 0 || image.height <= 0 ||
         image.pixels.size() != 4 * std::size_t(image.width) * std::size_t(image.height))
         fail(path, "image to write has inconsistent size");
     auto out = OIIO::ImageOutput::create(path.string());
-    if (!out) fail(path, "no image writer for this file type: " + OIIO::geterror());
+    if (!out) fail(path, "no image writer for this file type: " + reason(OIIO::geterror()));
     std::string const ext = path.extension().string();
     bool const eight_bit = ext == ".png" || ext == ".jpg" || ext == ".jpeg";
     OIIO::ImageSpec spec(image.width, image.height, 4, eight_bit ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
@@ -75,9 +180,9 @@ void write_image(std::filesystem::path const& path, rgba_image const& image) {
     std::vector<unsigned char> encoded;
     OIIO::Filesystem::IOVecOutput memory(encoded);
     bool const in_memory = out->supports("ioproxy") && out->set_ioproxy(&memory);
-    if (!out->open(path.string(), spec)) fail(path, "cannot open for writing: " + out->geterror());
-    if (!out->write_image(OIIO::TypeDesc::FLOAT, clamped.data())) fail(path, "cannot write: " + out->geterror());
-    if (!out->close()) fail(path, "cannot finish writing: " + out->geterror());
+    if (!out->open(path.string(), spec)) fail(path, "cannot open for writing: " + reason(out->geterror()));
+    if (!out->write_image(OIIO::TypeDesc::FLOAT, clamped.data())) fail(path, "cannot write: " + reason(out->geterror()));
+    if (!out->close()) fail(path, "cannot finish writing: " + reason(out->geterror()));
     if (!in_memory) return;
     errno = 0;
     std::ofstream file(path, std::ios::binary | std::ios::trunc);

@@ -3,24 +3,53 @@
 //
 //   read_image(path)          any image → RGBA float, row 0 at the top; grey → RGB, missing
 //                             alpha → 1; 8/16-bit data scaled to [0, 1]
+//   read_image_into(path, limits, allocate)
+//                             the same, decoded straight into the caller's storage
 //   write_image(path, image)  RGBA float → the file's format; values are clamped to [0, 1] and
 //                             quantised for 8-bit formats (PNG, JPEG); the file is checked after
 //                             closing (a full disk or /dev/full is an error, with the OS reason)
 //
-// Failures throw image_error naming the file and OpenImageIO's reason (missing file, unknown
-// format, truncated data). OpenImageIO's headers stay in the implementation unit.
+// A file is read only when it is a regular file within the size limit (a device such as
+// /dev/zero, a FIFO or a folder is refused before it is opened), only by the reader of its
+// extension (a file that is not what its extension says is refused, not tried with every
+// format OpenImageIO knows), and only after its header: an image of more than max_texels texels
+// (width × height; --max-texels, canopy::default_limits() by default) is refused before any pixel
+// is decoded (GIF, WebP and BMP headers are read here, since OpenImageIO decodes those images as
+// it opens them), as are images without pixels or channels, volumes and deep images.
+//
+// Failures throw image_error naming the file and the problem (missing file, unknown format,
+// truncated data, a limit), as "tree.png: image is 16384 × 16384 (268435456 texels), over the
+// limit of 67108864 texels (--max-texels)". OpenImageIO's headers stay in the implementation unit.
 module;
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <stdexcept>
+#include <string>
 #include <vector>
 export module canopy.image_io;
 
 export namespace canopy {
 
 struct image_error : std::runtime_error {
-    using std::runtime_error::runtime_error;
+    image_error(std::string file, std::string const& problem)
+        : std::runtime_error((file.empty() ? std::string("image") : file) + ": " + problem), file_(std::move(file)),
+          problem_(problem) {}
+
+    std::string const& file() const noexcept { return file_; }
+    std::string const& problem() const noexcept { return problem_; }
+
+private:
+    std::string file_, problem_;
 };
+
+// What read_image accepts; by default canopy::default_limits()'s values.
+struct image_read_limits {
+    std::uint64_t max_file_bytes; // bytes of the file (--max-file-bytes)
+    std::uint64_t max_texels;     // width × height (--max-texels)
+};
+image_read_limits default_image_read_limits();
 
 // Interleaved RGBA pixels, width × height, row-major, row 0 at the top.
 struct rgba_image {
@@ -35,7 +64,21 @@ struct rgba_image {
     }
 };
 
+// An image's size and encoding, known from its header before its pixels are decoded.
+struct image_header {
+    int width = 0;
+    int height = 0;
+    bool srgb = false; // as rgba_image::srgb
+};
+
 rgba_image read_image(std::filesystem::path const& path);
+rgba_image read_image(std::filesystem::path const& path, image_read_limits const& limits);
+
+// Reads the header, checks it, then calls allocate(header) once for the storage of the pixels
+// (4 · width · height floats, RGBA, row 0 first) and decodes into it.
+void read_image_into(std::filesystem::path const& path, image_read_limits const& limits,
+                     std::function<float*(image_header const&)> const& allocate);
+
 void write_image(std::filesystem::path const& path, rgba_image const& image);
 
 } // namespace canopy

@@ -3,33 +3,41 @@
 // Loads: images (.png .jpg .jpeg .exr .hdr .tif .tiff .bmp .tga .ppm .pgm .pnm .gif .webp) into
 // image_data: RGBA float as stored in the file, row 0 at the top; grey → RGB, missing alpha → 1;
 // 8/16-bit data scaled to [0, 1] and marked srgb (unless the file tags it linear), float data
-// linear. Parameters: none. Errors name the file and OpenImageIO's reason.
+// linear. Parameters: none. The file must be a regular file within the size limit, and its
+// header is checked against canopy::default_limits().max_texels (--max-texels) before a pixel is
+// decoded (canopy.image_io). Errors name the file and the problem, or OpenImageIO's reason.
 module;
+#include <cstddef>
 #include <filesystem>
+#include <new>
 #include <string>
 #include <utility>
 #include <vector>
 export module canopy.plugins.oiio;
 import canopy.scene;
 import canopy.image_io;
+import canopy.math;
 
 export namespace canopy {
 
+// The texels are decoded straight into image_data's storage (one copy of the image in memory).
 inline image_data read_texture_image(std::filesystem::path const& file) {
-    rgba_image img;
-    try {
-        img = read_image(file);
-    } catch (image_error const& e) {
-        throw scene_error(file.string(), "", e.what());
-    }
+    static_assert(sizeof(vec4<float>) == 4 * sizeof(float));
     image_data out;
     out.source = file.string();
-    out.width = img.width;
-    out.height = img.height;
-    out.srgb = img.srgb;
-    out.texels.resize(std::size_t(img.width) * std::size_t(img.height));
-    for (std::size_t i = 0; i < out.texels.size(); ++i)
-        out.texels[i] = {img.pixels[4 * i], img.pixels[4 * i + 1], img.pixels[4 * i + 2], img.pixels[4 * i + 3]};
+    try {
+        read_image_into(file, default_image_read_limits(), [&](image_header const& h) {
+            out.width = h.width;
+            out.height = h.height;
+            out.srgb = h.srgb;
+            out.texels.resize(std::size_t(h.width) * std::size_t(h.height));
+            return &out.texels.data()->x;
+        });
+    } catch (image_error const& e) {
+        throw scene_error(file.string(), "", e.problem());
+    } catch (std::bad_alloc const&) {
+        throw scene_error(file.string(), "", "out of memory while reading the image");
+    }
     return out;
 }
 

@@ -28,16 +28,32 @@
 // OFF headers, binary STL and OM headers, `f` lines of OBJ, `facet`s of ASCII STL) and throws
 // if they differ.
 //
-// Before OpenMesh sees a file it is checked here, so that bad input gives a clear message with
-// a line (text formats) or an element (binary formats) instead of OpenMesh's silent misreads:
-// empty files; ASCII OFF (header counts, every vertex line's three coordinates finite, every
-// face's corner count and indices in range, truncation; comments and blank lines are removed
-// before OpenMesh reads it, since its OFF reader takes none); PLY ASCII and binary (header, every
-// element walked: truncation, x/y/z finite, face indices in range); STL (binary size against its
-// triangle count, coordinates finite; ASCII vertex lines finite); OBJ (v lines finite, face
-// indices in range, faces of fewer than three corners); OM (header present, face count).
-// Binary OFF ("OFF BINARY") is handed to OpenMesh unchecked; its result still passes the face
-// count and scene::add_mesh's checks (indices in range, coordinates finite).
+// Before OpenMesh sees a file it is checked here, walked as OpenMesh's reader of its format will
+// read it, so that bad input gives a clear message with a line (text formats) or an element
+// (binary formats) instead of OpenMesh's silent misreads, endless loops or allocations sized by a
+// count in the file. OpenMesh's readers trust counts (they reserve for them, and loop over them
+// with no end-of-file check) and read numbers through C++ streams, which stop at a value they
+// cannot read (a float beyond 3.4e38, "nan", "0x10"), after which every read fails while the loops
+// go on. So, for every format: the file must be a regular file within --max-file-bytes; the
+// declared vertex and face counts must fit the file's size (binary files must hold what they
+// declare) and --max-triangles; every value OpenMesh reads as a float must be a decimal number
+// that fits a float (else "overflows a float"), every integer an integer in range; and:
+//   OFF (ASCII)   header [ST][C][N]OFF, counts, every vertex line (coordinates, normals, STOFF's
+//                 texture coordinates after COFF's colour), every face (corner count, indices in
+//                 range, truncation); the checked text is then handed to OpenMesh's importer here,
+//                 as OpenMesh's OFF reader would (that reader takes no comments, and reading from
+//                 memory it would keep the [ST][C][N] flags of the last OFF file it opened)
+//   OFF BINARY    counts against the bytes that follow, every vertex's floats finite, every
+//                 face's corner count and indices
+//   PLY           the header as OpenMesh parses it (format on line 2, element counts below 2^32,
+//                 list count types it reads, vertex x/y/z, face vertex_indices, no other list in the
+//                 elements it reads, binary types it converts, and a binary header laid out as its
+//                 seek to the data expects), then every element walked: truncation, values, face
+//                 indices in range
+//   STL           binary size against its triangle count and finite coordinates; ASCII: the three
+//                 lines OpenMesh reads after each "outer loop" are "vertex x y z"
+//   OBJ           v, vt and vn values, face indices in range, faces of fewer than three corners
+//   OM            header present, counts against the file's size
 //
 // A file with vertices but no faces (a PLY point cloud) loads as a mesh without triangles:
 // compile() drops it, and reports "nothing to trace" when nothing else is in the scene.
@@ -47,7 +63,9 @@
 module;
 #include <cstddef>
 #include <filesystem>
+#include <optional>
 #include <string>
+#include <string_view>
 export module canopy.plugins.openmesh;
 import canopy.scene;
 
@@ -64,6 +82,11 @@ struct openmesh_read_result {
     bool vertex_normals = false;      // the file has normals (mesh.normals is filled)
     bool texcoords = false;           // the file has texture coordinates (mesh.uvs is filled)
 };
+
+// The checks above on a file's bytes `data` (a file named `file`, of extension `ext`: ".ply",
+// ".off", ".stl", ".obj" or ".om"); returns the number of faces the file declares. Throws
+// scene_error on bad input.
+std::optional<std::size_t> check_openmesh_input(std::string_view data, std::string const& file, std::string const& ext);
 
 // Reads a .ply .off .stl .om or .obj file (by extension, case-insensitive). Throws scene_error
 // naming the file, and the line or element where known, on any bad input (see above).
