@@ -59,6 +59,11 @@ struct mesh_data {
     std::vector<std::array<vec2<float>, 3>> uvs;
     std::vector<std::array<vec3<float>, 3>> normals;
     int material = -1; // index into scene::materials; -1 = the default material
+    // Polygon faces the loader fanned although the fan may cover more than the face
+    // (triangulate_polygon's fanned_fallback), reported by compile(); first_fanned: where the
+    // first of them is in the source ("12": a line, or "face 7"), or empty.
+    std::size_t fanned_faces = 0;
+    std::string first_fanned;
 };
 
 enum class alpha_mode : std::uint8_t { opaque, mask };

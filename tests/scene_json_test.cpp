@@ -295,7 +295,7 @@ TEST_CASE("json: bad input names the file, the JSON path and the problem, the sc
         {R"({"prototypes": [{"type": "group"}]})", "prototypes[0]", "needs the key 'name'"},
         {R"({"materials": [{"name": "m", "colour": [1, 1]}]})", "materials[0].colour", "must be an array of 3 numbers"},
         {R"({"materials": [{"name": "m", "colour": [1, "x", 1]}]})", "materials[0].colour[1]", "must be a number, not a string"},
-        {R"({"materials": [{"name": "m", "colour": [1, 1e39, 1]}]})", "materials[0].colour[1]", "is not finite as a float"},
+        {R"({"materials": [{"name": "m", "colour": [1, 1e39, 1]}]})", "materials[0].colour[1]", "value 1e+39 overflows a float"},
         {R"({"materials": [{"name": "m", "alphaCutoff": 1.5}]})", "materials[0].alphaCutoff", "must be in [0, 1]"},
         {R"({"materials": [{"name": "m", "alphaMode": "BLEND"}]})", "materials[0].alphaMode", "'BLEND' is not OPAQUE or MASK"},
         {R"({"materials": [{"name": "m", "alphaMode": "MASK"}]})", "materials[0].alphaMode", "MASK needs a texture"},
@@ -324,7 +324,7 @@ TEST_CASE("json: bad input names the file, the JSON path and the problem, the sc
          "cannot be combined"},
         {R"({"nodes": [{"type": "transform", "matrix": [1,0,0,0, 0,1,0,0, 0,0,0,0]}]})", "nodes[0]", "singular"},
         {R"({"nodes": [{"type": "transform", "rotate": [45, 0, 0, 0]}]})", "nodes[0].rotate", "axis must not be zero"},
-        {R"({"nodes": [{"type": "transform", "scale": [1, 1, 1e300]}]})", "nodes[0].scale[2]", "not finite as a float"},
+        {R"({"nodes": [{"type": "transform", "scale": [1, 1, 1e300]}]})", "nodes[0].scale[2]", "value 1e+300 overflows a float"},
         {R"({"nodes": [{"type": "instance", "target": "x", "id": 1}]})", "nodes[0]", "instance target 'x' is not defined"},
         {R"({"prototypes": [{"name": "p", "type": "group"}], "nodes": [{"type": "instance", "target": "p", "id": 4294967296}]})",
          "nodes[0].id", "out of range"},
@@ -339,6 +339,7 @@ TEST_CASE("json: bad input names the file, the JSON path and the problem, the sc
         {R"({"nodes": [{"type": "test_node", "params": [1]}]})", "nodes[0].params", "must be an object, not an array"},
     };
     tmp.write("bad.obj", "v 0 0 0\nv q 0 0\n");
+    tmp.write("gone.xyz", "1 2 3\n"); // exists: its extension is what is refused
     for (std::size_t i = 0; i < cases.size(); ++i) {
         auto const& c = cases[i];
         INFO("case " << i << ": " << c.problem);

@@ -19,6 +19,7 @@
 #include <random>
 #include <string>
 #include <vector>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -547,7 +548,160 @@ TEST_CASE("canopy render and info name the file, the line and the problem for a 
         CHECK(result.exit_code == 1);
         CHECK_THAT(result.output, Catch::Contains(obj.string() + ":3: bad number 'q'"));
     }
-    auto const unknown = run_canopy({"info", (folder.path / "scene.xyz").string()});
+    auto const unknown = run_canopy({"info", folder.write("scene.xyz", "1 2 3\n").string()});
     CHECK(unknown.exit_code == 1);
     CHECK_THAT(unknown.output, Catch::Contains("unknown extension '.xyz'"));
+}
+
+TEST_CASE("canopy trace refuses what is not a scene or a ray file, naming the file and the problem, exit 1") {
+    temp_folder const folder("canopy_cli_hostile_test");
+    auto const& dir = folder.path;
+    std::string const triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    auto const obj = folder.write("tri.obj", triangle);
+    canopy::write_bench_rays(dir / "one.rays", {canopy::ray{{0.2f, 0.2f, -1.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, inf}});
+    auto const rays = dir / "one.rays";
+    fs::create_directory(dir / "folder.obj");
+    fs::create_directory(dir / "folder.rays");
+    fs::create_symlink("/dev/zero", dir / "zero.obj");
+    fs::create_symlink("/dev/zero", dir / "zero.inst");
+    fs::create_symlink("/dev/zero", dir / "zero.rays");
+    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
+    REQUIRE(::mkfifo((dir / "fifo.rays").c_str(), 0600) == 0);
+    // Random bytes (a NUL is planted at offset 12 of the first line), UTF-16 with and without its
+    // byte-order mark, control bytes.
+    std::string random(4096, '\0');
+    std::mt19937 rng(15);
+    for (char& c : random) c = char(std::uniform_int_distribution<int>(32, 126)(rng));
+    random[12] = '\0';
+    folder.write("random.obj", random);
+    folder.write("utf16.obj", std::string("\xFF\xFE" "v\0 \0" "0\0", 8));
+    folder.write("utf16_plain.obj", std::string("v\0 \0" "0\0", 6));
+    folder.write("control.obj", "v 0 0 0\nv 1 \x01 0\n");
+    folder.write("empty.obj", "");
+    folder.write("vertices.obj", "v 0 0 0\nv 1 0 0\n# no faces\n");
+    folder.write("huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1e300 0\nf 1 2 3\n");
+    folder.write("self.inst", "# a mesh of itself\nmesh self.inst\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    folder.write("no_instances.inst", "mesh tri.obj\n# nothing else\n");
+    folder.write("faceless.inst", "mesh vertices.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    folder.write("folder_mesh.inst", "mesh folder.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    folder.write("zero_mesh.inst", "mesh zero.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    folder.write("huge.inst", "mesh tri.obj\n1 0 0 0 0 1 0 0 0 0 1 -1e39\n");
+    folder.write("odd.rays", std::string(33, '\0'));
+    std::string const long_token(1 << 20, '7');
+    folder.write("long.obj", "v 0 0 " + long_token + "x\n");
+
+    struct bad_call {
+        std::string scene, rays, message; // message: the whole line after "canopy: "
+    };
+    auto const p = [&](char const* name) { return (dir / name).string(); };
+    std::vector<bad_call> const calls{
+        {p("folder.obj"), rays.string(), p("folder.obj") + ": is a folder, not a regular file"},
+        {p("zero.obj"), rays.string(), p("zero.obj") + ": is a character device, not a regular file"},
+        {p("zero.inst"), rays.string(), p("zero.inst") + ": is a character device, not a regular file"},
+        {p("fifo.obj"), rays.string(), p("fifo.obj") + ": is a FIFO, not a regular file"},
+        {p("random.obj"), rays.string(), p("random.obj") + ":1: not a text OBJ file: NUL byte at offset 12"},
+        {p("utf16.obj"), rays.string(),
+         p("utf16.obj") + ": not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)"},
+        {p("utf16_plain.obj"), rays.string(), p("utf16_plain.obj") + ":1: not a text OBJ file: NUL byte at offset 1"},
+        {p("control.obj"), rays.string(), p("control.obj") + ":2: not a text OBJ file: control byte 0x01 at offset 12"},
+        {p("empty.obj"), rays.string(), p("empty.obj") + ": no faces ('f' lines) and no vertices: nothing to trace"},
+        {p("vertices.obj"), rays.string(), p("vertices.obj") + ": no faces ('f' lines): nothing to trace"},
+        {p("huge.obj"), rays.string(), p("huge.obj") + ":3: value 1e300 overflows a float"},
+        {p("long.obj"), rays.string(), p("long.obj") + ":1: bad number '" + std::string(40, '7') + "…'"},
+        {p("self.inst"), rays.string(),
+         p("self.inst") + ": names itself as its mesh ('mesh self.inst'); the mesh is an .obj file"},
+        {p("no_instances.inst"), rays.string(), p("no_instances.inst") + ": no instance lines (12 numbers each): nothing to trace"},
+        {p("faceless.inst"), rays.string(), p("vertices.obj") + ": no faces ('f' lines): nothing to trace"},
+        {p("folder_mesh.inst"), rays.string(), p("folder.obj") + ": is a folder, not a regular file (mesh of folder_mesh.inst)"},
+        {p("zero_mesh.inst"), rays.string(),
+         p("zero.obj") + ": is a character device, not a regular file (mesh of zero_mesh.inst)"},
+        {p("huge.inst"), rays.string(), p("huge.inst") + ":2: value -1e39 overflows a float"},
+        {obj.string(), p("folder.rays"), p("folder.rays") + ": is a folder, not a regular file (ray file)"},
+        {obj.string(), p("zero.rays"), p("zero.rays") + ": is a character device, not a regular file (ray file)"},
+        {obj.string(), p("fifo.rays"), p("fifo.rays") + ": is a FIFO, not a regular file (ray file)"},
+        {obj.string(), p("odd.rays"), p("odd.rays") + ": size 33 bytes is not a multiple of 32 (one ray = 32 bytes)"},
+    };
+    for (auto const& call : calls) {
+        INFO("--scene " << call.scene << " --rays " << call.rays);
+        auto const result = run_canopy({"trace", "--scene", call.scene, "--rays", call.rays, "--query", "closest", "--out",
+                                        p("out.hits")});
+        INFO(result.output);
+        CHECK(result.exit_code == 1);
+        CHECK(result.output == "canopy: " + call.message + "\n");
+    }
+    // The hit file cannot be written into a folder; the good scene and rays trace.
+    auto const to_folder = run_canopy({"trace", "--scene", obj.string(), "--rays", rays.string(), "--query", "closest",
+                                       "--out", p("folder.rays")});
+    CHECK(to_folder.exit_code == 1);
+    CHECK(to_folder.output == "canopy: " + p("folder.rays") + ": cannot open file for writing: Is a directory\n");
+    auto const good = run_canopy({"trace", "--scene", obj.string(), "--rays", rays.string(), "--query", "closest", "--out",
+                                  p("out.hits")});
+    INFO(good.output);
+    CHECK(good.exit_code == 0);
+    CHECK(read_bytes(dir / "out.hits").size() == 20);
+}
+
+TEST_CASE("canopy info and render refuse OBJ files that hold nothing to trace or are not text, exit 1") {
+    temp_folder const folder("canopy_cli_hostile_test");
+    auto const& dir = folder.path;
+    std::string random(2048, '\0');
+    std::mt19937 rng(1515);
+    for (char& c : random) c = char(std::uniform_int_distribution<int>(0, 255)(rng));
+    // The first byte that is not text, found here: a control byte other than tab, LF, VT, FF, CR.
+    std::size_t offset = 0, line = 1;
+    for (; offset < random.size(); ++offset) {
+        auto const c = static_cast<unsigned char>(random[offset]);
+        if (c == '\n') ++line;
+        else if ((c < 0x20 && c != '\t' && c != '\r' && c != '\v' && c != '\f') || c == 0x7F) break;
+    }
+    REQUIRE(offset < random.size());
+    char byte[8];
+    std::snprintf(byte, sizeof byte, "0x%02X", unsigned(static_cast<unsigned char>(random[offset])));
+    std::string const what = random[offset] == '\0' ? "NUL byte" : std::string("control byte ") + byte;
+    auto const garbage = folder.write("garbage.obj", random);
+    auto const words = folder.write("words.obj", "these are words\nnot statements\n");
+    auto const points = folder.write("points.obj", "v 0 0 0\nv 1 0 0\np 1 2\n");
+    fs::create_directory(dir / "folder");
+    fs::create_symlink("/dev/zero", dir / "zero.obj");
+    struct bad_file {
+        fs::path file;
+        std::string message;
+    };
+    for (auto const& [file, message] : {
+             bad_file{garbage, garbage.string() + ":" + std::to_string(line) + ": not a text OBJ file: " + what +
+                                   " at offset " + std::to_string(offset)},
+             bad_file{words, words.string() + ": not an OBJ file: no OBJ statement (v, f, ...) in it, nothing to trace"},
+             bad_file{points, points.string() + ": no faces ('f' lines), only points or lines: nothing to trace"},
+             bad_file{dir / "folder", (dir / "folder").string() + ": is a folder, not a regular file"},
+             bad_file{dir / "zero.obj", (dir / "zero.obj").string() + ": is a character device, not a regular file"},
+         })
+        for (char const* command : {"info", "render"}) {
+            INFO(command << " " << file);
+            auto const result = command == std::string("info") ? run_canopy({command, file.string()})
+                                                               : run_canopy({command, file.string(), "-o", dir.string(),
+                                                                             "--size", "8x8"});
+            INFO(result.output);
+            CHECK(result.exit_code == 1);
+            CHECK(result.output == "canopy: " + message + "\n");
+        }
+}
+
+TEST_CASE("canopy info reports the non-convex polygon of more than 256 corners that had to be fanned") {
+    temp_folder const folder("canopy_cli_polygon_test");
+    // A simple comb of 300 corners in the plane z = 0: a zigzag top edge of 298 corners (heights
+    // 1 and 2, so non-convex) and two base corners; one face, on line 301.
+    std::string text;
+    for (int k = 0; k < 298; ++k) text += "v " + std::to_string(k) + " " + (k % 2 ? "1" : "2") + " 0\n";
+    text += "v 297 0 0\nv 0 0 0\nf";
+    for (int k = 1; k <= 300; ++k) text += " " + std::to_string(k);
+    text += "\n";
+    auto const comb = folder.write("comb.obj", text);
+    auto const result = run_canopy({"info", comb.string()});
+    INFO(result.output);
+    CHECK(result.exit_code == 0);
+    CHECK_THAT(result.output, Catch::Contains("(298 triangles stored)"));
+    CHECK_THAT(result.output,
+               Catch::Contains("  - 1 polygon faces fanned, not ear-clipped (self-intersecting, collinear, or non-convex "
+                               "with more than 256 corners): their triangles may cover more than the face; the first in "
+                               "mesh 'comb' (" + comb.string() + ":301)\n"));
 }

@@ -129,6 +129,7 @@ struct loaded_scene {
 
 std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path) {
     auto scene = std::make_unique<loaded_scene>();
+    canopy::require_regular_file(path); // a folder or a device is named as such, whatever its extension
     auto const ext = path.extension().string();
     if (ext == ".obj") {
         auto const mesh = canopy::read_bench_obj(path);
@@ -145,7 +146,7 @@ std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path
         scene->build_seconds = seconds_since(start);
         scene->instanced = true;
     } else {
-        throw canopy::format_error(path.string() + ": unknown scene extension '" + ext + "' (expected .obj or .inst)");
+        throw canopy::format_error(path.string() + ": unknown scene extension '" + canopy::excerpt(ext) + "' (expected .obj or .inst)");
     }
     return scene;
 }
