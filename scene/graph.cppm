@@ -134,7 +134,7 @@ public:
             used = 0;
         }
         if (used == 0 || used != it->second.size() || !std::isfinite(v))
-            throw scene_error(context, "parameter '" + key + "'", "'" + it->second + "' is not a finite number");
+            throw scene_error(context, "parameter '" + key + "'", "'" + excerpt(it->second) + "' is not a finite number");
         return v;
     }
     long long get_integer(std::string const& key, long long fallback, long long lo, long long hi,
@@ -143,7 +143,7 @@ public:
         double const v = get_number(key, double(fallback), context);
         if (v != std::floor(v) || v < double(lo) || v > double(hi))
             throw scene_error(context, "parameter '" + key + "'",
-                              "'" + get_string(key, "") + "' is not an integer in [" + std::to_string(lo) + ", " +
+                              "'" + excerpt(get_string(key, "")) + "' is not an integer in [" + std::to_string(lo) + ", " +
                                   std::to_string(hi) + "]");
         return static_cast<long long>(v);
     }

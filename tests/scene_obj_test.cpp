@@ -549,7 +549,7 @@ TEST_CASE("obj: assimp-testmodels files in detail") {
     }
 }
 
-TEST_CASE("obj: a non-convex face of more than 256 corners is fanned and reported; one of 256 is ear-clipped") {
+TEST_CASE("obj: a non-convex face of more than 256 corners is fanned and reported, one of 256 is ear-clipped") {
     temp_folder const tmp("canopy_obj_test");
     // A simple comb: a zigzag top edge (heights 1 and 2: non-convex) and two base corners.
     auto const comb = [&](std::string const& name, int corners_count) {
@@ -725,7 +725,7 @@ TEST_CASE("obj: vertices and triangles are limited by --max-triangles as they gr
     canopy::default_limits() = saved;
 }
 
-TEST_CASE("obj: a library named again and again is read once; materials naming the same texture share its image") {
+TEST_CASE("obj: a library named again and again is read once, materials naming the same texture share its image") {
     temp_folder const tmp("canopy_obj_test");
     auto const r = obj_registry();
     write_png(tmp.path / "leaf.png", 1, 1, {{1, 1, 1, 0.25f}});

@@ -553,13 +553,10 @@ TEST_CASE("canopy render and info name the file, the line and the problem for a 
     CHECK_THAT(unknown.output, Catch::Contains("unknown extension '.xyz'"));
 }
 
-TEST_CASE("canopy trace refuses what is not a scene or a ray file, naming the file and the problem, exit 1") {
+TEST_CASE("the trace readers refuse what is not a scene or a ray file, naming the file and the problem") {
     temp_folder const folder("canopy_cli_hostile_test");
     auto const& dir = folder.path;
-    std::string const triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
-    auto const obj = folder.write("tri.obj", triangle);
-    canopy::write_bench_rays(dir / "one.rays", {canopy::ray{{0.2f, 0.2f, -1.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, inf}});
-    auto const rays = dir / "one.rays";
+    folder.write("tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     fs::create_directory(dir / "folder.obj");
     fs::create_directory(dir / "folder.rays");
     fs::create_symlink("/dev/zero", dir / "zero.obj");
@@ -567,7 +564,7 @@ TEST_CASE("canopy trace refuses what is not a scene or a ray file, naming the fi
     fs::create_symlink("/dev/zero", dir / "zero.rays");
     REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
     REQUIRE(::mkfifo((dir / "fifo.rays").c_str(), 0600) == 0);
-    // Random bytes (a NUL is planted at offset 12 of the first line), UTF-16 with and without its
+    // Random bytes (a NUL planted at offset 12 of the first line), UTF-16 with and without its
     // byte-order mark, control bytes.
     std::string random(4096, '\0');
     std::mt19937 rng(15);
@@ -587,58 +584,83 @@ TEST_CASE("canopy trace refuses what is not a scene or a ray file, naming the fi
     folder.write("zero_mesh.inst", "mesh zero.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
     folder.write("huge.inst", "mesh tri.obj\n1 0 0 0 0 1 0 0 0 0 1 -1e39\n");
     folder.write("odd.rays", std::string(33, '\0'));
-    std::string const long_token(1 << 20, '7');
-    folder.write("long.obj", "v 0 0 " + long_token + "x\n");
+    folder.write("long.obj", "v 0 0 " + std::string(1 << 20, '7') + "x\n");
 
-    struct bad_call {
-        std::string scene, rays, message; // message: the whole line after "canopy: "
-    };
     auto const p = [&](char const* name) { return (dir / name).string(); };
-    std::vector<bad_call> const calls{
-        {p("folder.obj"), rays.string(), p("folder.obj") + ": is a folder, not a regular file"},
-        {p("zero.obj"), rays.string(), p("zero.obj") + ": is a character device, not a regular file"},
-        {p("zero.inst"), rays.string(), p("zero.inst") + ": is a character device, not a regular file"},
-        {p("fifo.obj"), rays.string(), p("fifo.obj") + ": is a FIFO, not a regular file"},
-        {p("random.obj"), rays.string(), p("random.obj") + ":1: not a text OBJ file: NUL byte at offset 12"},
-        {p("utf16.obj"), rays.string(),
-         p("utf16.obj") + ": not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)"},
-        {p("utf16_plain.obj"), rays.string(), p("utf16_plain.obj") + ":1: not a text OBJ file: NUL byte at offset 1"},
-        {p("control.obj"), rays.string(), p("control.obj") + ":2: not a text OBJ file: control byte 0x01 at offset 12"},
-        {p("empty.obj"), rays.string(), p("empty.obj") + ": no faces ('f' lines) and no vertices: nothing to trace"},
-        {p("vertices.obj"), rays.string(), p("vertices.obj") + ": no faces ('f' lines): nothing to trace"},
-        {p("huge.obj"), rays.string(), p("huge.obj") + ":3: value 1e300 overflows a float"},
-        {p("long.obj"), rays.string(), p("long.obj") + ":1: bad number '" + std::string(40, '7') + "…'"},
-        {p("self.inst"), rays.string(),
-         p("self.inst") + ": names itself as its mesh ('mesh self.inst'); the mesh is an .obj file"},
-        {p("no_instances.inst"), rays.string(), p("no_instances.inst") + ": no instance lines (12 numbers each): nothing to trace"},
-        {p("faceless.inst"), rays.string(), p("vertices.obj") + ": no faces ('f' lines): nothing to trace"},
-        {p("folder_mesh.inst"), rays.string(), p("folder.obj") + ": is a folder, not a regular file (mesh of folder_mesh.inst)"},
-        {p("zero_mesh.inst"), rays.string(),
-         p("zero.obj") + ": is a character device, not a regular file (mesh of zero_mesh.inst)"},
-        {p("huge.inst"), rays.string(), p("huge.inst") + ":2: value -1e39 overflows a float"},
-        {obj.string(), p("folder.rays"), p("folder.rays") + ": is a folder, not a regular file (ray file)"},
-        {obj.string(), p("zero.rays"), p("zero.rays") + ": is a character device, not a regular file (ray file)"},
-        {obj.string(), p("fifo.rays"), p("fifo.rays") + ": is a FIFO, not a regular file (ray file)"},
-        {obj.string(), p("odd.rays"), p("odd.rays") + ": size 33 bytes is not a multiple of 32 (one ray = 32 bytes)"},
+    auto const message = [](auto&& read) -> std::string {
+        try {
+            read();
+        } catch (canopy::format_error const& e) {
+            return e.what();
+        }
+        return "(no format_error)";
     };
-    for (auto const& call : calls) {
-        INFO("--scene " << call.scene << " --rays " << call.rays);
-        auto const result = run_canopy({"trace", "--scene", call.scene, "--rays", call.rays, "--query", "closest", "--out",
-                                        p("out.hits")});
-        INFO(result.output);
+    struct bad_file {
+        char const* name;
+        std::string message;
+    };
+    for (auto const& [name, expected] : {
+             bad_file{"folder.obj", p("folder.obj") + ": is a folder, not a regular file"},
+             bad_file{"zero.obj", p("zero.obj") + ": is a character device, not a regular file"},
+             bad_file{"zero.inst", p("zero.inst") + ": is a character device, not a regular file"},
+             bad_file{"fifo.obj", p("fifo.obj") + ": is a FIFO, not a regular file"},
+             bad_file{"random.obj", p("random.obj") + ":1: not a text OBJ file: NUL byte at offset 12"},
+             bad_file{"utf16.obj", p("utf16.obj") + ": not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)"},
+             bad_file{"utf16_plain.obj", p("utf16_plain.obj") + ":1: not a text OBJ file: NUL byte at offset 1"},
+             bad_file{"control.obj", p("control.obj") + ":2: not a text OBJ file: control byte 0x01 at offset 12"},
+             bad_file{"empty.obj", p("empty.obj") + ": no faces ('f' lines) and no vertices: nothing to trace"},
+             bad_file{"vertices.obj", p("vertices.obj") + ": no faces ('f' lines): nothing to trace"},
+             bad_file{"huge.obj", p("huge.obj") + ":3: value 1e300 overflows a float"},
+             bad_file{"long.obj", p("long.obj") + ":1: bad number '" + std::string(40, '7') + "…'"},
+             bad_file{"self.inst", p("self.inst") + ": names itself as its mesh ('mesh self.inst'); the mesh is an .obj file"},
+             bad_file{"no_instances.inst", p("no_instances.inst") + ": no instance lines (12 numbers each): nothing to trace"},
+             bad_file{"faceless.inst", p("vertices.obj") + ": no faces ('f' lines): nothing to trace"},
+             bad_file{"folder_mesh.inst", p("folder.obj") + ": is a folder, not a regular file (mesh of folder_mesh.inst)"},
+             bad_file{"zero_mesh.inst", p("zero.obj") + ": is a character device, not a regular file (mesh of zero_mesh.inst)"},
+             bad_file{"huge.inst", p("huge.inst") + ":2: value -1e39 overflows a float"},
+         }) {
+        INFO(name);
+        fs::path const file = dir / name;
+        if (file.extension() == ".obj") CHECK(message([&] { canopy::read_bench_obj(file); }) == expected);
+        else CHECK(message([&] { canopy::read_bench_inst(file); }) == expected);
+    }
+    for (auto const& [name, expected] : {
+             bad_file{"folder.rays", p("folder.rays") + ": is a folder, not a regular file (ray file)"},
+             bad_file{"zero.rays", p("zero.rays") + ": is a character device, not a regular file (ray file)"},
+             bad_file{"fifo.rays", p("fifo.rays") + ": is a FIFO, not a regular file (ray file)"},
+             bad_file{"odd.rays", p("odd.rays") + ": size 33 bytes is not a multiple of 32 (one ray = 32 bytes)"},
+         }) {
+        INFO(name);
+        CHECK(message([&] { canopy::read_bench_rays(dir / name); }) == expected);
+    }
+    CHECK(message([&] { canopy::write_bench_hits(dir / "folder.rays", {}); }) ==
+          p("folder.rays") + ": cannot open file for writing: Is a directory");
+}
+
+TEST_CASE("canopy trace exits 1 with the reader's message for a file that is not a scene or a ray file") {
+    temp_folder const folder("canopy_cli_hostile_test");
+    auto const& dir = folder.path;
+    auto const obj = folder.write("tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    canopy::write_bench_rays(dir / "one.rays", {canopy::ray{{0.2f, 0.2f, -1.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, inf}});
+    fs::create_directory(dir / "folder");
+    REQUIRE(::mkfifo((dir / "fifo.rays").c_str(), 0600) == 0);
+    folder.write("self.inst", "mesh self.inst\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    auto const p = [&](char const* name) { return (dir / name).string(); };
+    struct bad_call {
+        std::string scene, rays, out, message; // message: all the program writes
+    };
+    for (auto const& call : {
+             bad_call{p("folder"), p("one.rays"), p("out.hits"), p("folder") + ": is a folder, not a regular file"},
+             bad_call{p("self.inst"), p("one.rays"), p("out.hits"),
+                      p("self.inst") + ": names itself as its mesh ('mesh self.inst'); the mesh is an .obj file"},
+             bad_call{obj.string(), p("fifo.rays"), p("out.hits"), p("fifo.rays") + ": is a FIFO, not a regular file (ray file)"},
+             bad_call{obj.string(), p("one.rays"), p("folder"), p("folder") + ": cannot open file for writing: Is a directory"},
+         }) {
+        INFO("--scene " << call.scene << " --rays " << call.rays << " --out " << call.out);
+        auto const result = run_canopy({"trace", "--scene", call.scene, "--rays", call.rays, "--query", "closest", "--out", call.out});
         CHECK(result.exit_code == 1);
         CHECK(result.output == "canopy: " + call.message + "\n");
     }
-    // The hit file cannot be written into a folder; the good scene and rays trace.
-    auto const to_folder = run_canopy({"trace", "--scene", obj.string(), "--rays", rays.string(), "--query", "closest",
-                                       "--out", p("folder.rays")});
-    CHECK(to_folder.exit_code == 1);
-    CHECK(to_folder.output == "canopy: " + p("folder.rays") + ": cannot open file for writing: Is a directory\n");
-    auto const good = run_canopy({"trace", "--scene", obj.string(), "--rays", rays.string(), "--query", "closest", "--out",
-                                  p("out.hits")});
-    INFO(good.output);
-    CHECK(good.exit_code == 0);
-    CHECK(read_bytes(dir / "out.hits").size() == 20);
 }
 
 TEST_CASE("canopy info and render refuse OBJ files that hold nothing to trace or are not text, exit 1") {
@@ -659,31 +681,18 @@ TEST_CASE("canopy info and render refuse OBJ files that hold nothing to trace or
     std::snprintf(byte, sizeof byte, "0x%02X", unsigned(static_cast<unsigned char>(random[offset])));
     std::string const what = random[offset] == '\0' ? "NUL byte" : std::string("control byte ") + byte;
     auto const garbage = folder.write("garbage.obj", random);
-    auto const words = folder.write("words.obj", "these are words\nnot statements\n");
     auto const points = folder.write("points.obj", "v 0 0 0\nv 1 0 0\np 1 2\n");
-    fs::create_directory(dir / "folder");
     fs::create_symlink("/dev/zero", dir / "zero.obj");
-    struct bad_file {
-        fs::path file;
-        std::string message;
-    };
-    for (auto const& [file, message] : {
-             bad_file{garbage, garbage.string() + ":" + std::to_string(line) + ": not a text OBJ file: " + what +
-                                   " at offset " + std::to_string(offset)},
-             bad_file{words, words.string() + ": not an OBJ file: no OBJ statement (v, f, ...) in it, nothing to trace"},
-             bad_file{points, points.string() + ": no faces ('f' lines), only points or lines: nothing to trace"},
-             bad_file{dir / "folder", (dir / "folder").string() + ": is a folder, not a regular file"},
-             bad_file{dir / "zero.obj", (dir / "zero.obj").string() + ": is a character device, not a regular file"},
-         })
-        for (char const* command : {"info", "render"}) {
-            INFO(command << " " << file);
-            auto const result = command == std::string("info") ? run_canopy({command, file.string()})
-                                                               : run_canopy({command, file.string(), "-o", dir.string(),
-                                                                             "--size", "8x8"});
-            INFO(result.output);
-            CHECK(result.exit_code == 1);
-            CHECK(result.output == "canopy: " + message + "\n");
-        }
+    auto const info = run_canopy({"info", garbage.string()});
+    CHECK(info.exit_code == 1);
+    CHECK(info.output == "canopy: " + garbage.string() + ":" + std::to_string(line) + ": not a text OBJ file: " + what +
+                             " at offset " + std::to_string(offset) + "\n");
+    auto const render = run_canopy({"render", points.string(), "-o", dir.string(), "--size", "8x8"});
+    CHECK(render.exit_code == 1);
+    CHECK(render.output == "canopy: " + points.string() + ": no faces ('f' lines), only points or lines: nothing to trace\n");
+    auto const zero = run_canopy({"info", (dir / "zero.obj").string()});
+    CHECK(zero.exit_code == 1);
+    CHECK(zero.output == "canopy: " + (dir / "zero.obj").string() + ": is a character device, not a regular file\n");
 }
 
 TEST_CASE("canopy info reports the non-convex polygon of more than 256 corners that had to be fanned") {
