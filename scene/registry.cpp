@@ -154,7 +154,7 @@ node_id registry::generate(scene& s, std::string const& name, parameters const& 
     if (it == generators_.end()) {
         std::string known;
         for (auto const& [k, e] : generators_) known += (known.empty() ? "" : " ") + k;
-        throw scene_error("", "generator '" + name + "'", "is not registered (known: " + (known.empty() ? "none" : known) + ")");
+        throw scene_error("", "generator '" + excerpt(name) + "'", "is not registered (known: " + (known.empty() ? "none" : known) + ")");
     }
     return with_rollback(s, [&] { return it->second.function(s, parent, params); });
 }
@@ -165,8 +165,8 @@ void registry::expand_custom_nodes(scene& s) const {
         if (s.at(n).kind != node_kind::custom || !s.at(n).children.empty()) continue;
         auto it = node_types_.find(s.at(n).custom_type);
         if (it == node_types_.end())
-            throw scene_error(s.at(n).source, "node '" + s.at(n).name + "'",
-                              "node type '" + s.at(n).custom_type + "' is not registered by any plugin");
+            throw scene_error(s.at(n).source, "node '" + excerpt(s.at(n).name) + "'",
+                              "node type '" + excerpt(s.at(n).custom_type) + "' is not registered by any plugin");
         parameters const params = s.at(n).params;
         with_rollback(s, [&] { return it->second.function(s, n, params, *this); });
     }
