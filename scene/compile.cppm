@@ -15,6 +15,8 @@
 //     double, rounded once);
 //   - a scene that is one untransformed group uses the group's BVH as its top level;
 //   - meshes without triangles and subtrees without meshes are dropped;
+//   - polygon faces a loader had to fan although the fan may cover more than the face
+//     (mesh_data::fanned_faces) are counted and the first is named;
 //   - colour textures stored sRGB-encoded (image_data::srgb) are decoded to linear once, here;
 //   - the alpha-mask intersector is needed only when a placed mesh has a masked material
 //     (compile_statistics::alpha_mask_needed); kernels run without one otherwise;
@@ -65,6 +67,7 @@ import :limits;
 import :graph;
 import :registry;
 import :compiled;
+import :polygon;
 
 export namespace canopy {
 
@@ -329,6 +332,16 @@ public:
             }
             cm.uvs = md.uvs;
             stats_.triangles_stored += md.triangles.size();
+            if (md.fanned_faces > 0) {
+                if (stats_.faces_fanned == 0) {
+                    bool const line = !md.first_fanned.empty() &&
+                                      md.first_fanned.find_first_not_of("0123456789") == std::string::npos;
+                    first_fanned_ = "mesh '" + excerpt(md.name) + "'" +
+                                    (md.source.empty() && md.first_fanned.empty() ? std::string()
+                                     : " (" + md.source + (md.first_fanned.empty() ? "" : (line ? ":" : ": ") + md.first_fanned) + ")");
+                }
+                stats_.faces_fanned += md.fanned_faces;
+            }
         }
         stats_.meshes_built = c.meshes.size();
         // Triangles in the world: every placement at every level (a group's sum taken once).
@@ -382,6 +395,11 @@ public:
         if (stats_.identity_placements > 0)
             decide(std::to_string(stats_.identity_placements) + " of " + std::to_string(stats_.placements) +
                    " placements have the identity transform: not applied");
+        if (stats_.faces_fanned > 0)
+            decide(std::to_string(stats_.faces_fanned) +
+                   " polygon faces fanned, not ear-clipped (self-intersecting, collinear, or non-convex with more "
+                   "than " + std::to_string(max_ear_clipped_corners) +
+                   " corners): their triangles may cover more than the face; the first in " + first_fanned_);
 
         c.camera = camera_;
         c.camera_file = camera_file_;
@@ -772,6 +790,7 @@ private:
     std::vector<node_id> order_;     // every node, children and targets before their parents
     std::vector<node_id> reachable_; // the nodes the root reaches
     reach top_, full_;
+    std::string first_fanned_; // where the first fanned face of a built mesh is
     std::map<node_id, std::uint32_t> group_index_;
     std::vector<node_id> group_targets_;
     std::vector<prototype> group_protos_;

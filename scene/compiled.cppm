@@ -61,6 +61,7 @@ struct compile_statistics {
     std::size_t groups = 0;               // level-2 groups (shared subtrees with several meshes)
     std::size_t group_instances = 0;
     std::size_t flattened_placements = 0; // from nesting deeper than two levels
+    std::size_t faces_fanned = 0;         // polygon faces of built meshes fanned by the fallback (mesh_data)
     std::size_t materials = 0;
     std::size_t masked_materials_used = 0;
     std::size_t images_used = 0;

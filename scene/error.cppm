@@ -7,8 +7,10 @@
 // so a user can find the fault without a debugger. Nothing is half-loaded: a loader that throws
 // leaves the scene it was loading into as it was (see scene::transaction).
 module;
+#include <cstddef>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 export module canopy.scene:error;
 
 export namespace canopy {
@@ -37,5 +39,20 @@ private:
 
     std::string file_, where_, problem_;
 };
+
+// A piece of input quoted in a message: at most `max` bytes of `text` (cut at a UTF-8 character
+// boundary, then "…"), control bytes shown as '?'. A message never carries megabytes of input.
+inline std::string excerpt(std::string_view text, std::size_t max = 40) {
+    std::size_t n = text.size();
+    if (n > max) {
+        n = max;
+        while (n > 0 && (static_cast<unsigned char>(text[n]) & 0xC0) == 0x80) --n; // not inside a character
+    }
+    std::string out(text.substr(0, n));
+    for (char& c : out)
+        if (static_cast<unsigned char>(c) < 0x20 || c == 0x7F) c = '?';
+    if (n < text.size()) out += "…";
+    return out;
+}
 
 } // namespace canopy

@@ -81,6 +81,11 @@ struct mesh_data {
     std::vector<std::array<vec2<float>, 3>> uvs;
     std::vector<std::array<vec3<float>, 3>> normals;
     int material = -1; // index into scene::materials; -1 = the default material
+    // Polygon faces the loader fanned although the fan may cover more than the face
+    // (triangulate_polygon's fanned_fallback), reported by compile(); first_fanned: where the
+    // first of them is in the source ("12": a line, or "face 7"), or empty.
+    std::size_t fanned_faces = 0;
+    std::string first_fanned;
 };
 
 enum class alpha_mode : std::uint8_t { opaque, mask };
@@ -151,7 +156,7 @@ public:
             used = 0;
         }
         if (used == 0 || used != it->second.size() || !std::isfinite(v))
-            throw scene_error(context, "parameter '" + key + "'", "'" + it->second + "' is not a finite number");
+            throw scene_error(context, "parameter '" + key + "'", "'" + excerpt(it->second) + "' is not a finite number");
         return v;
     }
     long long get_integer(std::string const& key, long long fallback, long long lo, long long hi,
@@ -160,7 +165,7 @@ public:
         double const v = get_number(key, double(fallback), context);
         if (v != std::floor(v) || v < double(lo) || v > double(hi))
             throw scene_error(context, "parameter '" + key + "'",
-                              "'" + get_string(key, "") + "' is not an integer in [" + std::to_string(lo) + ", " +
+                              "'" + excerpt(get_string(key, "")) + "' is not an integer in [" + std::to_string(lo) + ", " +
                                   std::to_string(hi) + "]");
         return static_cast<long long>(v);
     }

@@ -13,11 +13,19 @@
 //
 // Only regular files are read (scenes, meshes, textures, ray files, plugins): a folder, a device
 // (/dev/zero), a FIFO or a socket is refused by name, before it is opened, so a read can neither
-// hang nor grow without end.
+// hang nor grow without end. read_regular_file reads such a file whole (or fails naming it), and
+// require_text refuses binary data where a loader reads text.
 module;
+#include <cerrno>
 #include <cstdint>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <ios>
+#include <new>
 #include <string>
+#include <string_view>
 #include <system_error>
 export module canopy.scene:limits;
 import :error;
@@ -85,6 +93,62 @@ inline std::uint64_t require_regular_file(std::filesystem::path const& file, std
 // The same check against the default limits.
 inline std::uint64_t require_regular_file(std::filesystem::path const& file, std::string const& what = {}) {
     return require_regular_file(file, default_limits().max_file_bytes, what);
+}
+
+// The whole of `file`, checked first by require_regular_file, read into a string of exactly its
+// size. A file that cannot be opened, a read that fails or comes up short, a file that grows while
+// it is read, and a buffer that cannot be allocated are scene_errors naming the file: a partial
+// read is never taken for the file.
+inline std::string read_regular_file(std::filesystem::path const& file, std::uint64_t max_bytes,
+                                     std::string const& what = {}) {
+    std::uint64_t const size = require_regular_file(file, max_bytes, what);
+    std::string const role = what.empty() ? std::string() : " (" + what + ")";
+    std::ifstream in(file, std::ios::binary);
+    if (!in) throw scene_error(file.string(), "", std::string("cannot be opened: ") + std::strerror(errno) + role);
+    std::string content;
+    try {
+        content.resize(std::size_t(size));
+    } catch (std::bad_alloc const&) {
+        throw scene_error(file.string(), "", "out of memory for its " + std::to_string(size) + " bytes" + role);
+    }
+    in.read(content.data(), std::streamsize(size));
+    if (in.bad() || std::uint64_t(in.gcount()) != size)
+        throw scene_error(file.string(), "", "read " + std::to_string(in.gcount()) + " of its " + std::to_string(size) +
+                                                 " bytes: the file cannot be read whole" + role);
+    if (in.peek() != std::ifstream::traits_type::eof())
+        throw scene_error(file.string(), "", "grew while it was being read" + role);
+    return content;
+}
+
+inline std::string read_regular_file(std::filesystem::path const& file, std::string const& what = {}) {
+    return read_regular_file(file, default_limits().max_file_bytes, what);
+}
+
+// Throws scene_error(file, line, "not a text FORMAT file: ...") unless `text` is text: a UTF-16 or
+// UTF-32 byte-order mark, a NUL byte or another control byte (any below 0x20 but tab, line feed,
+// vertical tab, form feed and carriage return; and 0x7F) is refused, named with its offset (and
+// its line). Bytes from 0x80 up are let through (UTF-8, Latin-1 comments and names).
+inline void require_text(std::string_view text, std::string const& file, std::string const& format) {
+    std::string const head = "not a text " + format + " file: ";
+    if (text.starts_with(std::string_view("\xFF\xFE\0\0", 4)) || text.starts_with(std::string_view("\0\0\xFE\xFF", 4)))
+        throw scene_error(file, "", head + "UTF-32 byte-order mark (only ASCII or UTF-8 text is read)");
+    if (text.starts_with("\xFF\xFE") || text.starts_with("\xFE\xFF"))
+        throw scene_error(file, "", head + "UTF-16 byte-order mark (only ASCII or UTF-8 text is read)");
+    std::size_t line = 1;
+    for (std::size_t i = 0; i < text.size(); ++i) {
+        auto const c = static_cast<unsigned char>(text[i]);
+        if (c >= 0x20 && c != 0x7F) continue;
+        if (c == '\n') {
+            ++line;
+            continue;
+        }
+        if (c == '\t' || c == '\r' || c == '\v' || c == '\f') continue;
+        char hex[8];
+        std::snprintf(hex, sizeof hex, "0x%02X", unsigned(c));
+        throw scene_error(file, std::to_string(line),
+                          head + (c == 0 ? std::string("NUL byte") : std::string("control byte ") + hex) + " at offset " +
+                              std::to_string(i));
+    }
 }
 
 // Throws scene_error(file, where, ...) when `count` of `what` exceeds `limit`; the message names

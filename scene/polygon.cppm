@@ -12,6 +12,8 @@
 //   max_ear_clipped_corners corners, and one whose clipping takes more than 8 n² corner-in-ear
 //   tests (ear clipping is quadratic in the corners for ordinary faces, cubic at worst, and no
 //   face may make a loader hang).
+//   Loaders count such faces in mesh_data::fanned_faces (and where the first is in first_fanned);
+//   compile() names them in its decisions, which `canopy info` prints.
 // Every face of n corners gives n − 2 triangles with the face's winding (corner order). Every
 // turn (orientation) test has an exact sign: its six products of float coordinates are exact in
 // double, and their sum is kept as a nonoverlapping expansion (Shewchuk 1997, "Adaptive
@@ -39,7 +41,7 @@ inline constexpr std::size_t max_ear_clipped_corners = 256;
 struct polygon_triangles {
     std::vector<std::array<std::uint32_t, 3>> triangles; // indices into the face's corners
     bool ear_clipped = false; // a non-convex face, cut into ears
-    bool fanned_fallback = false; // neither convex nor simple: fanned (may cover more than the face)
+    bool fanned_fallback = false; // fanned although not convex (may cover more than the face): report it
 };
 
 namespace detail {

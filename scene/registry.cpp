@@ -92,13 +92,15 @@ std::vector<registered> registry::generators() const { return list(generators_);
 std::vector<registered> registry::node_types() const { return list(node_types_); }
 
 node_id registry::load(scene& s, std::filesystem::path const& file, node_id parent, std::string_view plugin) const {
+    // The file first: a folder or a device is named as such, whatever its name ends with.
+    require_regular_file(file);
     std::string const ext = extension_of(file);
     auto it = loaders_.find(ext);
     if (it == loaders_.end() || it->second.empty()) {
         std::string known;
         for (auto const& [k, e] : loaders_) known += (known.empty() ? "" : " ") + k;
         throw scene_error(file.string(), "",
-                          (ext.empty() ? std::string("has no extension") : "unknown extension '" + ext + "'") +
+                          (ext.empty() ? std::string("has no extension") : "unknown extension '" + excerpt(ext) + "'") +
                               " (known: " + (known.empty() ? "none" : known) + ")");
     }
     entry<file_loader> const* chosen = &it->second.back();
@@ -110,10 +112,9 @@ node_id registry::load(scene& s, std::filesystem::path const& file, node_id pare
             offered += (offered.empty() ? "" : " ") + e.info.plugin;
         }
         if (chosen == nullptr)
-            throw scene_error(file.string(), "", "plugin '" + std::string(plugin) + "' does not load '" + ext +
+            throw scene_error(file.string(), "", "plugin '" + excerpt(plugin) + "' does not load '" + excerpt(ext) +
                                                      "' files (" + offered + " do)");
     }
-    require_regular_file(file);
     return with_rollback(s, [&] {
         try {
             return chosen->function(s, file, parent, *this);
@@ -129,11 +130,11 @@ node_id registry::load(scene& s, std::filesystem::path const& file, node_id pare
 }
 
 image_data registry::load_image(std::filesystem::path const& file) const {
+    require_regular_file(file, "texture");
     std::string const ext = extension_of(file);
     auto it = image_loaders_.find(ext);
     if (it == image_loaders_.end())
-        throw scene_error(file.string(), "", "no image loader for extension '" + ext + "'");
-    require_regular_file(file, "texture");
+        throw scene_error(file.string(), "", "no image loader for extension '" + excerpt(ext) + "'");
     image_data img;
     try {
         img = it->second.function(file);
@@ -153,7 +154,7 @@ node_id registry::generate(scene& s, std::string const& name, parameters const& 
     if (it == generators_.end()) {
         std::string known;
         for (auto const& [k, e] : generators_) known += (known.empty() ? "" : " ") + k;
-        throw scene_error("", "generator '" + name + "'", "is not registered (known: " + (known.empty() ? "none" : known) + ")");
+        throw scene_error("", "generator '" + excerpt(name) + "'", "is not registered (known: " + (known.empty() ? "none" : known) + ")");
     }
     return with_rollback(s, [&] { return it->second.function(s, parent, params); });
 }
@@ -164,8 +165,8 @@ void registry::expand_custom_nodes(scene& s) const {
         if (s.at(n).kind != node_kind::custom || !s.at(n).children.empty()) continue;
         auto it = node_types_.find(s.at(n).custom_type);
         if (it == node_types_.end())
-            throw scene_error(s.at(n).source, "node '" + s.at(n).name + "'",
-                              "node type '" + s.at(n).custom_type + "' is not registered by any plugin");
+            throw scene_error(s.at(n).source, "node '" + excerpt(s.at(n).name) + "'",
+                              "node type '" + excerpt(s.at(n).custom_type) + "' is not registered by any plugin");
         parameters const params = s.at(n).params;
         with_rollback(s, [&] { return it->second.function(s, n, params, *this); });
     }

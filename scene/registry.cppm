@@ -71,9 +71,10 @@ public:
     void add_node_type(std::string name, std::string plugin, std::string description, generator expand);
 
     // Loads a file by its extension (case-insensitive) under parent (default: the root), with
-    // the extension's default loader or the one `plugin` registered. Errors: missing file,
-    // unknown extension (the message lists the known ones), no such plugin for the extension,
-    // and whatever the loader reports. On error the scene is unchanged; errors that do not name
+    // the extension's default loader or the one `plugin` registered. Errors: a path that is not
+    // a regular file (missing, a folder, a device, a FIFO; checked before the extension), one over
+    // the limit of bytes per file, an unknown extension (the message lists the known ones), no
+    // such plugin for the extension, and whatever the loader reports. On error the scene is unchanged; errors that do not name
     // a file are given this one's name.
     node_id load(scene& s, std::filesystem::path const& file, node_id parent = 0, std::string_view plugin = {}) const;
     image_data load_image(std::filesystem::path const& file) const;

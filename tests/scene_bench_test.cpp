@@ -9,6 +9,7 @@
 #include <array>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -266,15 +267,15 @@ TEST_CASE("malformed bench files are scene errors naming the file at fault and t
     for (auto const& [load, file, where, problem] : {
              expectation{"quad.obj", "quad.obj", "5", "only triangles"},
              expectation{"index.obj", "index.obj", "5", "out of range"},
-             expectation{"empty.obj", "empty.obj", "", "no triangles"},
+             expectation{"empty.obj", "empty.obj", "", "no faces ('f' lines): nothing to trace"},
              expectation{"short_row.inst", "short_row.inst", "3", "12 numbers"},
              expectation{"no_mesh.inst", "no_mesh.inst", "", "no 'mesh' line"},
              expectation{"two_meshes.inst", "two_meshes.inst", "2", "second 'mesh'"},
-             expectation{"missing_mesh.inst", "nowhere.obj", "", "cannot open"},
+             expectation{"missing_mesh.inst", "nowhere.obj", "", "file not found (mesh of missing_mesh.inst)"},
              expectation{"bad_mesh.inst", "quad.obj", "5", "only triangles"},
              expectation{"nan.inst", "nan.inst", "3", "non-finite"},
              expectation{"singular.inst", "singular.inst", "2", "singular"},
-             expectation{"no_instances.inst", "no_instances.inst", "", "no instance lines"},
+             expectation{"no_instances.inst", "no_instances.inst", "", "no instance lines (12 numbers each): nothing to trace"},
              expectation{"absent.inst", "absent.inst", "", "not found"},
          }) {
         CAPTURE(load);
@@ -306,9 +307,9 @@ TEST_CASE("broken and odd OBJ files of assimp-testmodels: errors with lines, or 
     auto const numbers = load("number_formats.obj");
     CHECK(numbers.where() == "11");
     CHECK(numbers.problem().find("'3.1+e2'") != std::string::npos);
-    // UTF-16 text and a point cloud: no `f` line the subset reads.
-    CHECK(load("box_UTF16BE.obj").problem().find("no triangles") != std::string::npos);
-    CHECK(load("testpoints.obj").problem().find("no triangles") != std::string::npos);
+    // UTF-16 text is not read; a point cloud has no `f` line.
+    CHECK(load("box_UTF16BE.obj").problem() == "not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)");
+    CHECK(load("testpoints.obj").problem() == "no faces ('f' lines): nothing to trace");
 
     // Extra spaces everywhere: one triangle, (1,2,3) (2,3,1) (3,1,2).
     canopy::scene s;
@@ -325,4 +326,56 @@ TEST_CASE("broken and odd OBJ files of assimp-testmodels: errors with lines, or 
     canopy::scene cube;
     r.load(cube, models / "cube_usemtl.obj", cube.root(), "bench");
     CHECK(cube.meshes().at(0).triangles.size() == 12);
+}
+
+TEST_CASE("bench readers: counts grow within the limits, byte sizes of rays and hits are checked, messages stay short") {
+    temp_folder const tmp("canopy_scene_bench_test");
+    fs::path const& folder = tmp.path;
+    auto const message = [](auto&& f) -> std::string {
+        try {
+            f();
+        } catch (canopy::format_error const& e) {
+            return e.what();
+        }
+        return "(no format_error)";
+    };
+    write(folder / "three.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 3\nf 1 2 3\n");
+    write(folder / "two.inst", "mesh three.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 5 0 1 0 0 0 0 1 0\n");
+    auto const saved = canopy::default_limits();
+    canopy::default_limits().max_triangles = 2;
+    CHECK(message([&] { canopy::read_bench_obj(folder / "three.obj"); }) ==
+          (folder / "three.obj").string() + ":3: 3 vertices exceed the limit of 2 (--max-triangles)");
+    canopy::default_limits().max_triangles = 3;
+    CHECK(canopy::read_bench_obj(folder / "three.obj").triangles.size() == 3);
+    canopy::default_limits().max_placements = 1;
+    CHECK(message([&] { canopy::read_bench_inst(folder / "two.inst"); }) ==
+          (folder / "two.inst").string() + ":3: 2 instances exceed the limit of 1 (--max-placements)");
+    canopy::default_limits() = saved;
+    CHECK(canopy::read_bench_inst(folder / "two.inst").instances.size() == 2);
+
+    // Rays and hits from bytes (what the fuzzer feeds): sizes that are not whole records are errors.
+    CHECK(message([&] { canopy::parse_bench_rays(std::string(31, '\0'), "r.rays"); }) ==
+          "r.rays: size 31 bytes is not a multiple of 32 (one ray = 32 bytes)");
+    CHECK(message([&] { canopy::parse_bench_hits(std::string(21, '\0'), "h.hits"); }) ==
+          "h.hits: size 21 bytes is not a multiple of 20 (one hit = 20 bytes)");
+    float const f[8] = {1, 2, 3, 0.5f, 0, 0, -1, 9};
+    std::string bytes(64, '\0');
+    std::memcpy(bytes.data() + 32, f, 32);
+    auto const rays = canopy::parse_bench_rays(bytes, "r.rays");
+    REQUIRE(rays.size() == 2);
+    CHECK((rays[1].origin.x == 1 && rays[1].origin.y == 2 && rays[1].origin.z == 3 && rays[1].tmin == 0.5f));
+    CHECK((rays[1].direction.z == -1 && rays[1].tmax == 9));
+    write(folder / "two.rays", bytes);
+    auto const read = canopy::read_bench_rays(folder / "two.rays");
+    REQUIRE(read.size() == 2);
+    CHECK((read[1].origin.y == 2 && read[1].tmax == 9 && read[0].tmax == 0));
+
+    // Numbers: 1e300 overflows a float, an over-long token is quoted by its prefix only.
+    CHECK(message([&] { canopy::parse_bench_obj("v 0 1e300 0\n", "o.obj"); }) == "o.obj:1: value 1e300 overflows a float");
+    CHECK(message([&] { canopy::parse_bench_obj("v 0 1e-300 0\nv 1 0 0\nv nan 0 0\n", "o.obj"); }) ==
+          "o.obj:3: non-finite number 'nan'");
+    CHECK(message([&] { canopy::parse_bench_inst("mesh m.obj\n1 0 0 0 0 1 0 0 0 0 1 " + std::string(100000, '9') + "\n", "i.inst"); }) ==
+          "i.inst:2: value " + std::string(40, '9') + "… overflows a float");
+    CHECK(message([&] { canopy::parse_bench_inst("mesh " + std::string(5000, 'm') + "\n", "i.inst"); }) ==
+          "i.inst:1: mesh path of 5000 bytes is too long ('" + std::string(40, 'm') + "…')");
 }

@@ -12,6 +12,7 @@
 #include <fstream>
 #include <string>
 #include <vector>
+#include <sys/stat.h>
 
 #include "test_support.hpp"
 
@@ -295,7 +296,7 @@ TEST_CASE("json: bad input names the file, the JSON path and the problem, the sc
         {R"({"prototypes": [{"type": "group"}]})", "prototypes[0]", "needs the key 'name'"},
         {R"({"materials": [{"name": "m", "colour": [1, 1]}]})", "materials[0].colour", "must be an array of 3 numbers"},
         {R"({"materials": [{"name": "m", "colour": [1, "x", 1]}]})", "materials[0].colour[1]", "must be a number, not a string"},
-        {R"({"materials": [{"name": "m", "colour": [1, 1e39, 1]}]})", "materials[0].colour[1]", "is not finite as a float"},
+        {R"({"materials": [{"name": "m", "colour": [1, 1e39, 1]}]})", "materials[0].colour[1]", "value 1e+39 overflows a float"},
         {R"({"materials": [{"name": "m", "alphaCutoff": 1.5}]})", "materials[0].alphaCutoff", "must be in [0, 1]"},
         {R"({"materials": [{"name": "m", "alphaMode": "BLEND"}]})", "materials[0].alphaMode", "'BLEND' is not OPAQUE or MASK"},
         {R"({"materials": [{"name": "m", "alphaMode": "MASK"}]})", "materials[0].alphaMode", "MASK needs a texture"},
@@ -324,7 +325,7 @@ TEST_CASE("json: bad input names the file, the JSON path and the problem, the sc
          "cannot be combined"},
         {R"({"nodes": [{"type": "transform", "matrix": [1,0,0,0, 0,1,0,0, 0,0,0,0]}]})", "nodes[0]", "singular"},
         {R"({"nodes": [{"type": "transform", "rotate": [45, 0, 0, 0]}]})", "nodes[0].rotate", "axis must not be zero"},
-        {R"({"nodes": [{"type": "transform", "scale": [1, 1, 1e300]}]})", "nodes[0].scale[2]", "not finite as a float"},
+        {R"({"nodes": [{"type": "transform", "scale": [1, 1, 1e300]}]})", "nodes[0].scale[2]", "value 1e+300 overflows a float"},
         {R"({"nodes": [{"type": "instance", "target": "x", "id": 1}]})", "nodes[0]", "instance target 'x' is not defined"},
         {R"({"prototypes": [{"name": "p", "type": "group"}], "nodes": [{"type": "instance", "target": "p", "id": 4294967296}]})",
          "nodes[0].id", "out of range"},
@@ -339,6 +340,7 @@ TEST_CASE("json: bad input names the file, the JSON path and the problem, the sc
         {R"({"nodes": [{"type": "test_node", "params": [1]}]})", "nodes[0].params", "must be an object, not an array"},
     };
     tmp.write("bad.obj", "v 0 0 0\nv q 0 0\n");
+    tmp.write("gone.xyz", "1 2 3\n"); // exists: its extension is what is refused
     for (std::size_t i = 0; i < cases.size(); ++i) {
         auto const& c = cases[i];
         INFO("case " << i << ": " << c.problem);
@@ -414,4 +416,101 @@ TEST_CASE("json: the example forest.json loads and compiles to the counts its fi
     CHECK(st.alpha_mask_needed);
     REQUIRE(c.camera.has_value());
     CHECK(same(c.camera->eye, {0, 4, 16}));
+}
+
+TEST_CASE("json: only regular files are read: the scene, its mesh files and its textures") {
+    temp_folder const tmp("canopy_json_test");
+    auto const& dir = tmp.path;
+    auto const r = json_registry();
+    fs::create_directory(dir / "folder.json");
+    fs::create_directory(dir / "folder.obj");
+    fs::create_directory(dir / "folder.png");
+    fs::create_symlink("/dev/zero", dir / "zero.json");
+    fs::create_symlink("/dev/zero", dir / "zero.obj");
+    fs::create_symlink("/dev/zero", dir / "zero.png");
+    REQUIRE(::mkfifo((dir / "fifo.json").c_str(), 0600) == 0);
+    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
+    REQUIRE(::mkfifo((dir / "fifo.png").c_str(), 0600) == 0);
+    struct bad_case {
+        std::string name;
+        char const* kind;
+    };
+    for (auto const& [name, kind] : {bad_case{"folder", "a folder"}, bad_case{"zero", "a character device"},
+                                     bad_case{"fifo", "a FIFO"}}) {
+        INFO(name);
+        auto const scene = load_failure(r, dir / (name + ".json"));
+        CHECK(scene.file == (dir / (name + ".json")).string());
+        CHECK(scene.where == "");
+        CHECK(scene.problem == std::string("is ") + kind + ", not a regular file");
+
+        auto const mesh = load_failure(r, tmp.write("mesh_" + name + ".json",
+                                                    R"({"meshes": [{"name": "m", "file": ")" + name + R"(.obj"}]})"));
+        CHECK(mesh.where == "meshes[0].file");
+        CHECK(mesh.problem == (dir / (name + ".obj")).string() + ": is " + kind + ", not a regular file");
+
+        auto const texture = load_failure(r, tmp.write("texture_" + name + ".json",
+                                                       R"({"materials": [{"name": "m", "texture": ")" + name + R"(.png"}]})"));
+        CHECK(texture.where == "materials[0].texture");
+        CHECK(texture.problem == (dir / (name + ".png")).string() + ": is " + kind + ", not a regular file (texture)");
+    }
+}
+
+TEST_CASE("json: values that overflow a float or a double, deep nesting and declared counts are refused by name") {
+    temp_folder const tmp("canopy_json_test");
+    auto const r = json_registry();
+    std::string const big(1 << 20, 'k');
+    std::string const prefix(40, 'k');
+    struct bad_case {
+        std::string text, where, problem;
+    };
+    std::vector<bad_case> const cases = {
+        {R"({"meshes": [{"name": "t", "positions": [0,0,0, 1,0,0, 0,1e300,0], "indices": [0,1,2]}]})",
+         "meshes[0].positions[7]", "value 1e+300 overflows a float"},
+        {R"({"nodes": [{"type": "camera", "fovy": -3.5e38}]})", "nodes[0].fovy", "value -3.5e+38 overflows a float"},
+        {R"({"nodes": [{"type": "transform", "translate": [1e400, 0, 0]}]})", "",
+         "number overflow parsing '1e400'"},
+        {R"({"nodes": [{"type": "transform", "translate": [1)" + std::string(100000, '0') + R"(, 0, 0]}]})", "",
+         "number overflow parsing '1" + std::string(39, '0') + "…'"},
+        // Column 1048598: the control byte after the 21 bytes before the string and its 2^20 bytes.
+        {R"({"nodes": [{"type": ")" + big + "\x01" + R"("}]})", "",
+         "parse error at line 1, column 1048598: syntax error while parsing value - invalid string: control character "
+         "U+0001 (SOH) must be escaped to \\u0001; last read: '\"" + std::string(39, 'k') + "…'"},
+        {R"({"nodes": [{"type": ")" + big + R"("}]})", "nodes[0].type",
+         "'" + prefix + "…' is neither a built-in node type (group, transform, mesh, instance, camera, light, generator) "
+                        "nor one a plugin registers"},
+        {R"({")" + big + R"(": 1})", prefix + "…", "unknown key (known here: version, materials, meshes, prototypes, nodes)"},
+        {R"({"meshes": [{"name": "m", "file": ")" + big + R"(.obj"}]})", "meshes[0].file",
+         "file name of 1048580 bytes is too long ('" + prefix + "…')"},
+        {R"({"nodes": [{"type": "mesh", "mesh": ")" + big + R"("}]})", "nodes[0]", "mesh '" + prefix + "…' is not defined"},
+    };
+    for (std::size_t i = 0; i < cases.size(); ++i) {
+        auto const& c = cases[i];
+        INFO("case " << i);
+        auto const file = tmp.write("overflow" + std::to_string(i) + ".json", c.text);
+        auto const f = load_failure(r, file);
+        CHECK(f.file == file.string());
+        CHECK(f.where == c.where);
+        CHECK(f.problem == c.problem);
+        CHECK(f.message.size() < 400 + file.string().size());
+    }
+
+    // Arrays nested deeper than --max-depth, refused while parsing (before any element is checked).
+    std::string const deep = R"({"nodes": [{"type": "test_node", "params": {"a": )" + std::string(5000, '[') +
+                             std::string(5000, ']') + "}}]}";
+    auto const nested = load_failure(r, tmp.write("deep_arrays.json", deep));
+    CHECK(nested.where == "");
+    CHECK(nested.problem == "4097 levels of nested arrays and objects exceed the limit of 4096 (--max-depth)");
+
+    // Counts an inline mesh declares are checked against --max-triangles before it is built.
+    auto const saved = canopy::default_limits();
+    canopy::default_limits().max_triangles = 2;
+    auto const vertices = load_failure(r, tmp.write("vertices.json", R"({"meshes": [{"name": "t",
+        "positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]}]})"));
+    CHECK(vertices.where == "meshes[0].positions");
+    CHECK(vertices.problem == "3 vertices exceed the limit of 2 (--max-triangles)");
+    auto const triangles = load_failure(r, tmp.write("triangles.json", R"({"meshes": [{"name": "t",
+        "positions": [0,0,0, 1,0,0], "indices": [0,1,1, 0,1,1, 0,1,1]}]})"));
+    CHECK(triangles.where == "meshes[0].indices");
+    CHECK(triangles.problem == "3 triangles exceed the limit of 2 (--max-triangles)");
+    canopy::default_limits() = saved;
 }

@@ -253,9 +253,19 @@ TEST_CASE("limits: a glTF node hierarchy 20000 deep is refused at the default de
     auto const file = folder.write("deep.gltf", text);
     canopy::registry r;
     canopy::register_gltf_plugin(r);
+    // The loader refuses the hierarchy before building it: nodes[4096] is 4097 levels deep.
+    canopy::scene refused;
+    CHECK(message_of([&] { r.load(refused, file, refused.root()); }) ==
+          file.string() + ": nodes[4096]: is 4097 levels deep in the node hierarchy, over the limit of 4096 (--max-depth)");
+    // With the depth raised for the loader, compile() refuses it at its own default, naming the node
+    // (root → group 'deep.gltf' (1) → nodes[0] (2) → …: nodes[4095] is 4097 deep, the mesh n + 2).
     canopy::scene s;
-    r.load(s, file, s.root());
-    // root → group 'deep.gltf' (1) → nodes[0] (2) → …: nodes[4095] is 4097 deep, the mesh n + 2.
+    {
+        auto const saved = canopy::default_limits();
+        canopy::default_limits().max_depth = 20002;
+        r.load(s, file, s.root());
+        canopy::default_limits() = saved;
+    }
     std::string const message = message_of([&] { canopy::compile(s, {.name = file.string()}); });
     CHECK(message == file.string() +
                          ": transform 'nodes[4095]': 20002 levels of nesting (children and instances) exceed the limit of 4096 "

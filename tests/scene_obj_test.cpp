@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +15,7 @@
 #include <sstream>
 #include <string>
 #include <vector>
+#include <sys/stat.h>
 
 #include "test_support.hpp"
 
@@ -147,6 +149,8 @@ TEST_CASE("obj: a polygon of 50000 corners is fanned into 49998 triangles") {
     auto const meshes = meshes_of(s, r.load(s, tmp.write("big.obj", text)));
     REQUIRE(meshes.size() == 1);
     REQUIRE(meshes[0]->triangles.size() == std::size_t(n - 2));
+    CHECK(meshes[0]->fanned_faces == 1); // non-convex and over max_ear_clipped_corners: reported
+    CHECK(meshes[0]->first_fanned == std::to_string(n + 1));
     auto const last = corners(*meshes[0], n - 3); // (v0, v[n-2], v[n-1])
     CHECK(same(last[0], {0, 0, 0}));
     CHECK(same(last[1], {float(n - 2), float((n - 2) % 7), 0}));
@@ -350,8 +354,11 @@ TEST_CASE("obj: bad input names the file, the line and the problem, the scene is
         {"v 0 0 0\nv 1 2\n", "2", "'v' needs 3 to 7 numbers"},
         {"v 0 nan 0\n", "1", "number 'nan' is not finite"},
         {"v 0 0 inf\n", "1", "number 'inf' is not finite"},
-        {"v 0 0 1e39\n", "1", "number '1e39' is out of range for a float"},
-        {"v 0 0 1e999\n", "1", "out of range"},
+        {"v 0 0 1e39\n", "1", "value 1e39 overflows a float"},
+        {"v 0 0 1e999\n", "1", "value 1e999 overflows a float"},
+        {"v 0 0 -1e300\n", "1", "value -1e300 overflows a float"},
+        {"vt 0.5 1e300\n", "1", "value 1e300 overflows a float"},
+        {"vn 0 +1e300 0\n", "1", "value +1e300 overflows a float"},
         {"vt 0.5 -nan\n", "1", "not finite"},
         {"vn 0 0\n", "1", "'vn' needs 3 numbers"},
         {tri + "f 1 2 0\n", "4", "vertex index 0 is not valid"},
@@ -383,13 +390,15 @@ TEST_CASE("obj: bad input names the file, the line and the problem, the scene is
     // A missing library is named with the .obj line asking for it.
     auto const f = load_failure(r, tmp.write("nolib.obj", tri + "mtllib lib/none.mtl\n"));
     CHECK(f.where == "4");
-    CHECK_THAT(f.problem, Catch::Contains("none.mtl' not found"));
+    CHECK(f.problem == "material library 'lib/none.mtl': file not found");
 }
 
 TEST_CASE("obj: bad material libraries and missing textures name the .mtl line") {
     temp_folder const tmp("canopy_obj_test");
     auto const r = obj_registry();
     write_png(tmp.path / "ok.png", 1, 1, {{1, 1, 1, 1}});
+    tmp.write("ok.txt", "not an image\n");
+    fs::create_directory(tmp.path / "sub");
     struct bad_case {
         std::string mtl, where, problem;
     };
@@ -407,6 +416,8 @@ TEST_CASE("obj: bad material libraries and missing textures name the .mtl line")
         {"newmtl a\nKd spectral file.rfl\n", "2", "not supported"},
         {"newmtl a\nKd 1 nan 1\n", "2", "not finite"},
         {"newmtl a\nmap_Kd ok.txt\n", "2", "no image loader for extension '.txt'"},
+        {"newmtl a\nmap_Kd none.png\n", "2", "none.png: file not found (texture)"},
+        {"newmtl a\nmap_Kd sub\n", "2", "sub: is a folder, not a regular file (texture)"},
     };
     for (std::size_t i = 0; i < cases.size(); ++i) {
         auto const& c = cases[i];
@@ -455,7 +466,9 @@ TEST_CASE("obj: every OBJ of assimp-testmodels loads or fails with a scene_error
         }
     }
     CHECK(loaded + refused == 22);
-    CHECK(refused == 3); // box_UTF16BE.obj, number_formats.obj, cube_mtllib_after_g.obj
+    // box_UTF16BE.obj, number_formats.obj, cube_mtllib_after_g.obj; point_cloud.obj, testpoints.obj and
+    // testline.obj hold no faces.
+    CHECK(refused == 6);
 }
 
 TEST_CASE("obj: assimp-testmodels files in detail") {
@@ -501,7 +514,7 @@ TEST_CASE("obj: assimp-testmodels files in detail") {
     SECTION("cube_mtllib_after_g.obj: CRLF lines; its library (a .mat file) does not exist: line 2 says so") {
         auto const f = load_failure(r, folder / "cube_mtllib_after_g.obj");
         CHECK(f.where == "2");
-        CHECK_THAT(f.problem, Catch::Contains("material library") && Catch::Contains("cube_mtllib_after_g.mat' not found"));
+        CHECK(f.problem == "material library 'cube_mtllib_after_g.mat': file not found");
     }
     SECTION("spider.obj: 762 vertices, 1368 triangles, JPEG textures with Windows paths") {
         canopy::scene s;
@@ -518,11 +531,12 @@ TEST_CASE("obj: assimp-testmodels files in detail") {
         r.load(s, folder / "testmixed.obj");
         CHECK(triangles(s) == 12);
     }
-    SECTION("point_cloud.obj: no faces, an empty group") {
-        canopy::scene s;
-        auto const group = r.load(s, folder / "point_cloud.obj");
-        CHECK(s.at(group).children.empty());
-        CHECK(s.meshes().empty());
+    SECTION("point_cloud.obj, testpoints.obj, testline.obj: no faces, nothing to trace: refused") {
+        CHECK(load_failure(r, folder / "point_cloud.obj").problem == "no faces ('f' lines): nothing to trace");
+        CHECK(load_failure(r, folder / "testpoints.obj").problem ==
+              "no faces ('f' lines), only points or lines: nothing to trace");
+        CHECK(load_failure(r, folder / "testline.obj").problem ==
+              "no faces ('f' lines), only points or lines: nothing to trace");
     }
     SECTION("number_formats.obj: '3.1+e2' on line 11 is a bad number") {
         auto const f = load_failure(r, folder / "number_formats.obj");
@@ -531,6 +545,208 @@ TEST_CASE("obj: assimp-testmodels files in detail") {
     }
     SECTION("box_UTF16BE.obj: UTF-16 is refused") {
         auto const f = load_failure(r, folder / "box_UTF16BE.obj");
-        CHECK_THAT(f.problem, Catch::Contains("UTF-16"));
+        CHECK(f.problem == "not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)");
+    }
+}
+
+TEST_CASE("obj: a non-convex face of more than 256 corners is fanned and reported, one of 256 is ear-clipped") {
+    temp_folder const tmp("canopy_obj_test");
+    // A simple comb: a zigzag top edge (heights 1 and 2: non-convex) and two base corners.
+    auto const comb = [&](std::string const& name, int corners_count) {
+        std::string text;
+        for (int k = 0; k < corners_count - 2; ++k) text += "v " + std::to_string(k) + " " + (k % 2 ? "1" : "2") + " 0\n";
+        text += "v " + std::to_string(corners_count - 3) + " 0 0\nv 0 0 0\n";
+        text += "f";
+        for (int k = 1; k <= corners_count; ++k) text += " " + std::to_string(k);
+        return tmp.write(name, text + "\n");
+    };
+    auto const r = obj_registry();
+    canopy::scene big;
+    auto const file = comb("comb300.obj", 300);
+    auto const meshes = meshes_of(big, r.load(big, file));
+    REQUIRE(meshes.size() == 1);
+    CHECK(meshes[0]->triangles.size() == 298);
+    CHECK(meshes[0]->fanned_faces == 1);
+    CHECK(meshes[0]->first_fanned == "301"); // the f line
+    auto const c = canopy::compile(big, {.plugins = &r});
+    CHECK(c.statistics.faces_fanned == 1);
+    CHECK(std::count(c.statistics.decisions.begin(), c.statistics.decisions.end(),
+                     "1 polygon faces fanned, not ear-clipped (self-intersecting, collinear, or non-convex with more than "
+                     "256 corners): their triangles may cover more than the face; the first in mesh 'comb300' (" +
+                         file.string() + ":301)") == 1);
+
+    canopy::scene small;
+    auto const clipped = meshes_of(small, r.load(small, comb("comb256.obj", 256)));
+    REQUIRE(clipped.size() == 1);
+    CHECK(clipped[0]->triangles.size() == 254);
+    CHECK(clipped[0]->fanned_faces == 0);
+    auto const cs = canopy::compile(small, {.plugins = &r});
+    CHECK(cs.statistics.faces_fanned == 0);
+    for (auto const& d : cs.statistics.decisions) CHECK_THAT(d, !Catch::Contains("fanned"));
+}
+
+TEST_CASE("obj: only regular files are read: the OBJ, its material libraries and their textures") {
+    temp_folder const tmp("canopy_obj_test");
+    auto const& dir = tmp.path;
+    auto const r = obj_registry();
+    std::string const tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n";
+    fs::create_directory(dir / "folder.obj");
+    fs::create_directory(dir / "folder.mtl");
+    fs::create_directory(dir / "folder.png");
+    fs::create_symlink("/dev/zero", dir / "zero.obj");
+    fs::create_symlink("/dev/zero", dir / "zero.mtl");
+    fs::create_symlink("/dev/zero", dir / "zero.png");
+    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
+    REQUIRE(::mkfifo((dir / "fifo.mtl").c_str(), 0600) == 0);
+    REQUIRE(::mkfifo((dir / "fifo.png").c_str(), 0600) == 0);
+    struct bad_case {
+        std::string name;
+        char const* kind;
+    };
+    for (auto const& [name, kind] : {bad_case{"folder", "a folder"}, bad_case{"zero", "a character device"},
+                                     bad_case{"fifo", "a FIFO"}}) {
+        INFO(name);
+        // The .obj itself (the registry checks it before its extension).
+        auto const obj = load_failure(r, dir / (name + ".obj"));
+        CHECK(obj.file == (dir / (name + ".obj")).string());
+        CHECK(obj.where == "");
+        CHECK(obj.problem == std::string("is ") + kind + ", not a regular file");
+        // A material library: named with the .obj line asking for it.
+        auto const lib = load_failure(r, tmp.write("lib_" + name + ".obj", "mtllib " + name + ".mtl\n" + tri));
+        CHECK(lib.file == (dir / ("lib_" + name + ".obj")).string());
+        CHECK(lib.where == "1");
+        CHECK(lib.problem == "material library '" + name + ".mtl': is " + kind + ", not a regular file");
+        // A texture: named with the .mtl line asking for it.
+        auto const mtl = tmp.write("tex_" + name + ".mtl", "newmtl a\nmap_Kd " + name + ".png\n");
+        auto const tex = load_failure(r, tmp.write("tex_" + name + ".obj", "mtllib tex_" + name + ".mtl\n" + tri));
+        CHECK(tex.file == mtl.string());
+        CHECK(tex.where == "2");
+        CHECK(tex.problem == "texture '" + name + ".png': " + (dir / (name + ".png")).string() + ": is " + kind +
+                                 ", not a regular file (texture)");
+    }
+}
+
+TEST_CASE("obj: files that are not text or hold no faces are refused, naming the byte, its offset and line") {
+    temp_folder const tmp("canopy_obj_test");
+    auto const r = obj_registry();
+    std::string random(3000, '\0');
+    std::mt19937 rng(7);
+    for (char& c : random) c = char(std::uniform_int_distribution<int>(0x20, 0xFE)(rng));
+    std::replace(random.begin(), random.end(), '\x7F', '\xFF'); // DEL is a control byte too
+    random[1700] = '\n';
+    random[2100] = '\x1B';
+    struct bad_case {
+        std::string text, where, problem;
+    };
+    std::vector<bad_case> const cases = {
+        {random, "2", "not a text OBJ file: control byte 0x1B at offset 2100"},
+        {"v 0 0 0\nv 1 0 0\n\0\0\0"s, "3", "not a text OBJ file: NUL byte at offset 16"},
+        {"\xFF\xFEv\0 \0"s, "", "not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)"},
+        {"\xFE\xFF\0v\0 "s, "", "not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)"},
+        {"\xFF\xFE\0\0v\0\0\0"s, "", "not a text OBJ file: UTF-32 byte-order mark (only ASCII or UTF-8 text is read)"},
+        {"v\0 \0\x30\0"s, "1", "not a text OBJ file: NUL byte at offset 1"},
+        {"", "", "is empty: nothing to trace"},
+        {" \n\t\r\n", "", "is empty: nothing to trace"},
+        {"\xC3\xA9t\xC3\xA9 words\nno statement\n", "", "not an OBJ file: no OBJ statement (v, f, ...) in it, nothing to trace"},
+        {"# only a comment\n", "", "not an OBJ file: no OBJ statement (v, f, ...) in it, nothing to trace"},
+        {"v 0 0 0\nv 1 0 0\nv 0 1 0\no name\nusemtl a\n", "", "no faces ('f' lines): nothing to trace"},
+        {"v 0 0 0\nv 1 0 0\nl 1 2\n", "", "no faces ('f' lines), only points or lines: nothing to trace"},
+    };
+    for (std::size_t i = 0; i < cases.size(); ++i) {
+        auto const& c = cases[i];
+        INFO("case " << i << ": " << c.problem);
+        auto const file = tmp.write("notext" + std::to_string(i) + ".obj", c.text);
+        auto const f = load_failure(r, file);
+        CHECK(f.file == file.string());
+        CHECK(f.where == c.where);
+        CHECK(f.problem == c.problem);
+    }
+    // An MTL file is held to the same rule.
+    tmp.write("binary.mtl", "newmtl a\nKd 1 1 1\n\x02\n");
+    auto const f = load_failure(r, tmp.write("uses_binary.obj", "mtllib binary.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"));
+    CHECK(f.file == (tmp.path / "binary.mtl").string());
+    CHECK(f.where == "3");
+    CHECK(f.problem == "not a text MTL file: control byte 0x02 at offset 18");
+}
+
+TEST_CASE("obj: messages quote at most a short prefix of the offending input") {
+    temp_folder const tmp("canopy_obj_test");
+    auto const r = obj_registry();
+    std::string const big(1 << 20, 'x'); // 1 MiB without a space
+    std::string const prefix(40, 'x');
+    std::string const tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    struct bad_case {
+        std::string text, where, problem;
+    };
+    std::vector<bad_case> const cases = {
+        {"v 0 0 " + big + "\n", "1", "bad number '" + prefix + "…'"},
+        {tri + "f 1 2 " + big + "\n", "4", "bad vertex index '" + prefix + "…' in corner '" + prefix + "…'"},
+        {tri + "f 1 2 3/" + big + "\n", "4", "bad texture coordinate index '" + prefix + "…' in corner '3/" +
+                                                   std::string(38, 'x') + "…'"},
+        {"mtllib " + big + "\n" + tri + "f 1 2 3\n", "1",
+         "material library name of 1048576 bytes is too long ('" + prefix + "…')"},
+    };
+    for (std::size_t i = 0; i < cases.size(); ++i) {
+        auto const& c = cases[i];
+        INFO("case " << i);
+        auto const f = load_failure(r, tmp.write("long" + std::to_string(i) + ".obj", c.text));
+        CHECK(f.where == c.where);
+        CHECK(f.problem == c.problem);
+        CHECK(f.message.size() < 400);
+    }
+}
+
+TEST_CASE("obj: vertices and triangles are limited by --max-triangles as they grow") {
+    temp_folder const tmp("canopy_obj_test");
+    auto const r = obj_registry();
+    auto const saved = canopy::default_limits();
+    canopy::default_limits().max_triangles = 4;
+    struct bad_case {
+        std::string text, where, problem;
+    };
+    std::vector<bad_case> const cases = {
+        {"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 2 0\n", "5", "5 vertices exceed the limit of 4 (--max-triangles)"},
+        {"vt 0 0\nvt 0 0\nvt 0 0\nvt 0 0\nvt 0 0\n", "5", "5 texture coordinates exceed the limit of 4 (--max-triangles)"},
+        {"vn 0 0 1\nvn 0 0 1\nvn 0 0 1\nvn 0 0 1\nvn 0 0 1\n", "5", "5 normals exceed the limit of 4 (--max-triangles)"},
+        {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 3\nf 1 2 3\nf 1 2 3\nf 1 2 3\n", "8",
+         "5 triangles exceed the limit of 4 (--max-triangles)"},
+        {"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 2 3 4 1 2\n", "6",
+         "5 triangles exceed the limit of 4 (--max-triangles)"},
+    };
+    for (std::size_t i = 0; i < cases.size(); ++i) {
+        auto const& c = cases[i];
+        INFO("case " << i);
+        auto const f = load_failure(r, tmp.write("limit" + std::to_string(i) + ".obj", c.text));
+        CHECK(f.where == c.where);
+        CHECK(f.problem == c.problem);
+    }
+    canopy::scene s;
+    CHECK_NOTHROW(r.load(s, tmp.write("four.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\nf 1 2 3\nf 4 3 2\n")));
+    canopy::default_limits() = saved;
+}
+
+TEST_CASE("obj: a library named again and again is read once, materials naming the same texture share its image") {
+    temp_folder const tmp("canopy_obj_test");
+    auto const r = obj_registry();
+    write_png(tmp.path / "leaf.png", 1, 1, {{1, 1, 1, 0.25f}});
+    constexpr int n = 5000;
+    std::string lib, obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    for (int i = 0; i < n; ++i) {
+        lib += "newmtl m" + std::to_string(i) + "\nKd 0.5 0.5 0.5\n" + (i % 2 ? "" : "map_Kd leaf.png\n");
+        obj += "mtllib lib.mtl\nusemtl m" + std::to_string(i) + "\nf 1 2 3\n";
+    }
+    tmp.write("lib.mtl", lib);
+    auto const file = tmp.write("many.obj", obj);
+    canopy::scene s;
+    auto const start = std::chrono::steady_clock::now();
+    auto const meshes = meshes_of(s, r.load(s, file));
+    double const seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    CHECK(seconds < 5.0); // read n times, the library would take minutes: n × n materials parsed
+    CHECK(meshes.size() == std::size_t(n));
+    CHECK(s.materials().size() == std::size_t(n));
+    REQUIRE(s.images().size() == 1);
+    for (int i = 0; i < n; i += 997) {
+        CHECK(s.materials()[std::size_t(i)].image == (i % 2 ? -1 : 0));
+        CHECK(s.materials()[std::size_t(i)].alpha == (i % 2 ? canopy::alpha_mode::opaque : canopy::alpha_mode::mask));
     }
 }

@@ -4,6 +4,7 @@
 // space, with the placements' transforms composed by hand in double precision.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -13,6 +14,7 @@
 #include <random>
 #include <string>
 #include <vector>
+#include <sys/stat.h>
 
 #include "test_support.hpp"
 
@@ -490,10 +492,11 @@ TEST_CASE("the registry loads by extension, names what it knows, and rolls back 
     CHECK(s.meshes().empty());
 
     CHECK(message_of([&] { r.load(s, dir / "missing.tri"); }) == (dir / "missing.tri").string() + ": file not found");
+    std::ofstream(dir / "scene.xyz") << "1 2 3\n";
     CHECK(message_of([&] { r.load(s, dir / "scene.xyz"); }) ==
           (dir / "scene.xyz").string() + ": unknown extension '.xyz' (known: .tri)");
-    CHECK(message_of([&] { r.load(s, dir / "bad.tri", s.root(), "other"); }).find("plugin 'other' does not load '.tri'") !=
-          std::string::npos);
+    CHECK(message_of([&] { r.load(s, dir / "bad.TRI", s.root(), "other"); }) ==
+          (dir / "bad.TRI").string() + ": plugin 'other' does not load '.tri' files (test do)");
     CHECK(message_of([&] { r.generate(s, "forest", {}); }).find("generator 'forest': is not registered") !=
           std::string::npos);
     CHECK(message_of([&] { r.load_plugin(dir / "bad.TRI"); }).find("cannot load plugin") != std::string::npos);
@@ -523,4 +526,101 @@ TEST_CASE("custom nodes are expanded by their registered type, and refused witho
     u.add_custom(u.root(), "tree", {}, "t");
     CHECK(message_of([&] { canopy::compile(u, {.plugins = &r}); }).find("node type 'tree' is not registered") !=
           std::string::npos);
+}
+
+TEST_CASE("the registry checks the file before its extension: folders, devices and FIFOs are named, never opened") {
+    canopy::registry r;
+    int calls = 0;
+    r.add_loader(".tri", "test", "counts its calls", [&](canopy::scene& s, std::filesystem::path const&, node_id parent,
+                                                      canopy::registry const&) {
+        ++calls;
+        return s.add_group(parent);
+    });
+    r.add_image_loader(".png", "test", [&](std::filesystem::path const&) {
+        ++calls;
+        return canopy::image_data{};
+    });
+    test_support::temp_folder const tmp("canopy_scene_test");
+    auto const& dir = tmp.path;
+    std::filesystem::create_directory(dir / "folder");
+    std::filesystem::create_directory(dir / "folder.tri");
+    std::filesystem::create_directory(dir / "folder.png");
+    std::filesystem::create_symlink("/dev/zero", dir / "zero.tri");
+    std::filesystem::create_symlink("/dev/zero", dir / "zero");
+    std::filesystem::create_symlink("zero.tri", dir / "link_to_link.tri");
+    REQUIRE(::mkfifo((dir / "fifo.tri").c_str(), 0600) == 0);
+    REQUIRE(::mkfifo((dir / "fifo.png").c_str(), 0600) == 0);
+    canopy::scene s;
+    auto const p = [&](char const* name) { return (dir / name).string(); };
+    CHECK(message_of([&] { r.load(s, dir / "folder"); }) == p("folder") + ": is a folder, not a regular file");
+    CHECK(message_of([&] { r.load(s, dir / "folder.tri"); }) == p("folder.tri") + ": is a folder, not a regular file");
+    CHECK(message_of([&] { r.load(s, dir / "zero"); }) == p("zero") + ": is a character device, not a regular file");
+    CHECK(message_of([&] { r.load(s, dir / "zero.tri"); }) == p("zero.tri") + ": is a character device, not a regular file");
+    CHECK(message_of([&] { r.load(s, dir / "link_to_link.tri"); }) ==
+          p("link_to_link.tri") + ": is a character device, not a regular file");
+    CHECK(message_of([&] { r.load(s, dir / "fifo.tri"); }) == p("fifo.tri") + ": is a FIFO, not a regular file");
+    CHECK(message_of([&] { r.load(s, dir / "fifo.tri", s.root(), "other"); }) == p("fifo.tri") + ": is a FIFO, not a regular file");
+    CHECK(message_of([&] { r.load_image(dir / "folder.png"); }) == p("folder.png") + ": is a folder, not a regular file (texture)");
+    CHECK(message_of([&] { r.load_image(dir / "fifo.png"); }) == p("fifo.png") + ": is a FIFO, not a regular file (texture)");
+    CHECK(message_of([&] { r.load_plugin(dir / "zero"); }) == p("zero") + ": is a character device, not a regular file");
+    CHECK(calls == 0);
+    CHECK(s.nodes().size() == 1);
+
+    // Bytes per file: the limit is checked before the file is opened.
+    std::ofstream(dir / "six.tri") << "12345\n";
+    auto const saved = canopy::default_limits();
+    canopy::default_limits().max_file_bytes = 5;
+    CHECK(message_of([&] { r.load(s, dir / "six.tri"); }) ==
+          p("six.tri") + ": is 6 bytes, over the limit of 5 bytes per file (--max-file-bytes)");
+    canopy::default_limits().max_file_bytes = 6;
+    CHECK_NOTHROW(r.load(s, dir / "six.tri"));
+    CHECK(calls == 1);
+    canopy::default_limits() = saved;
+}
+
+TEST_CASE("read_regular_file reads a file whole or names why not, require_text refuses binary data by offset") {
+    test_support::temp_folder const tmp("canopy_scene_test");
+    std::string bytes(70000, 'a');
+    bytes[12345] = '\0';
+    auto const file = tmp.path / "bytes.bin";
+    std::ofstream(file, std::ios::binary) << bytes;
+    CHECK(canopy::read_regular_file(file) == bytes);
+    CHECK(canopy::read_regular_file(file, 70000, "mesh") == bytes);
+    CHECK(message_of([&] { canopy::read_regular_file(file, 69999, "mesh"); }) ==
+          file.string() + ": is 70000 bytes, over the limit of 69999 bytes per file (--max-file-bytes) (mesh)");
+    CHECK(message_of([&] { canopy::read_regular_file(tmp.path / "none"); }) == (tmp.path / "none").string() + ": file not found");
+    CHECK(message_of([&] { canopy::read_regular_file("/dev/zero"); }) == "/dev/zero: is a character device, not a regular file");
+
+    CHECK_NOTHROW(canopy::require_text("v 1 2 3\r\n\tf\v\f \xC3\xA9\xFF\n", "a.obj", "OBJ"));
+    CHECK(message_of([&] { canopy::require_text(bytes, "b.bin", "PLY"); }) == "b.bin:1: not a text PLY file: NUL byte at offset 12345");
+    CHECK(message_of([&] { canopy::require_text("a\nb\n\x7F", "c", "OFF"); }) == "c:3: not a text OFF file: control byte 0x7F at offset 4");
+    CHECK(message_of([&] { canopy::require_text("\xFE\xFF\0a", "d", "OBJ"); }) ==
+          "d: not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)");
+
+    // A message quotes at most 40 bytes of input, cut between UTF-8 characters, control bytes as '?'.
+    CHECK(canopy::excerpt(std::string(10000000, 'z')) == std::string(40, 'z') + "…");
+    CHECK(canopy::excerpt("short\ttext") == "short?text");
+    CHECK(canopy::excerpt(std::string(39, 'e') + "\xC3\xA9" + "tail") == std::string(39, 'e') + "…");
+    CHECK(canopy::excerpt(std::string(38, 'e') + "\xC3\xA9" + "tail") == std::string(38, 'e') + "\xC3\xA9…");
+    CHECK(canopy::excerpt("exactly", 7) == "exactly");
+}
+
+TEST_CASE("compile() reports the polygon faces a loader had to fan, naming the first") {
+    canopy::scene s;
+    canopy::mesh_data m = sphere("bad polygons");
+    m.source = "model.ply";
+    m.fanned_faces = 3;
+    m.first_fanned = "face 17";
+    s.add_mesh_node(s.root(), s.add_mesh(m));
+    canopy::mesh_data n = sphere("fine");
+    s.add_mesh_node(s.root(), s.add_mesh(n));
+    canopy::mesh_data unplaced = sphere("unplaced");
+    unplaced.fanned_faces = 5;
+    s.add_mesh(unplaced); // not built: not reported
+    auto const c = canopy::compile(s);
+    CHECK(c.statistics.faces_fanned == 3);
+    CHECK(std::count(c.statistics.decisions.begin(), c.statistics.decisions.end(),
+                     "3 polygon faces fanned, not ear-clipped (self-intersecting, collinear, or non-convex with more than "
+                     "256 corners): their triangles may cover more than the face; the first in mesh 'bad polygons' "
+                     "(model.ply: face 17)") == 1);
 }

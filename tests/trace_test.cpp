@@ -553,7 +553,7 @@ TEST_CASE("canopy render and info name the file, the line and the problem for a 
         CHECK(result.exit_code == 1);
         CHECK_THAT(result.output, Catch::Contains(obj.string() + ":3: bad number 'q'"));
     }
-    auto const unknown = run_canopy({"info", (folder.path / "scene.xyz").string()});
+    auto const unknown = run_canopy({"info", folder.write("scene.xyz", "1 2 3\n").string()});
     CHECK(unknown.exit_code == 1);
     CHECK_THAT(unknown.output, Catch::Contains("unknown extension '.xyz'"));
 }
@@ -718,9 +718,9 @@ TEST_CASE("canopy trace refuses inputs that are not regular files or hold nothin
         {f.obj.string(), "/dev/zero", "/dev/zero: is a character device, not a regular file (ray file)"},
         {f.obj.string(), (f.folder.path / "pipe.rays").string(), "pipe.rays: is a FIFO, not a regular file (ray file)"},
         {f.obj.string(), (f.folder.path / "empty.rays").string(), "empty.rays: holds no rays (the file is empty): nothing to trace"},
-        {(f.folder.path / "points.obj").string(), f.mesh_rays_file.string(), "points.obj: holds no triangles: nothing to trace"},
-        {(f.folder.path / "none.inst").string(), f.mesh_rays_file.string(), "none.inst: holds no instances: nothing to trace"},
-        {(f.folder.path / "folder.rays" / "x.obj").string(), f.mesh_rays_file.string(), "x.obj: file not found (scene)"},
+        {(f.folder.path / "points.obj").string(), f.mesh_rays_file.string(), "points.obj: no faces ('f' lines): nothing to trace"},
+        {(f.folder.path / "none.inst").string(), f.mesh_rays_file.string(), "none.inst: no instance lines (12 numbers each): nothing to trace"},
+        {(f.folder.path / "folder.rays" / "x.obj").string(), f.mesh_rays_file.string(), "x.obj: file not found"},
     };
     for (auto const& input : inputs) {
         INFO(input.scene << " " << input.rays);
@@ -825,7 +825,7 @@ TEST_CASE("canopy render refuses a degenerate camera, naming the file and the ca
          "collapsed.json: camera 'tiny': eye (0, 0, 5e-30) and target (0, 0, 0) are too close to give a view direction in float"},
         // Placed beyond float range: the eye is infinite.
         {"far", R"({"type": "transform", "scale": 1e38, "children": [{"type": "camera", "name": "far", "eye": [0, 0, 50]}]})",
-         "far.json: camera 'far': eye (0, 0, inf) is not finite"},
+         "far.json: camera 'far': placed by the transforms above it, the camera's eye, target or up is not finite in float"},
         // Without a camera, bounds beyond float range or with no extent in float.
         {"huge", "", "huge.json: automatic camera: the scene's bounds (-3e+38, 0, -3e+38) .. (3e+38, 0, 3e+38) are empty or beyond float range: give the scene a camera"},
         {"speck", "", "speck.json: automatic camera: the scene's bounds"},
@@ -1016,4 +1016,166 @@ TEST_CASE("canopy render: bounds beyond float range give no AO radius and no def
     // With a radius given, the AO image is made.
     CHECK(run_canopy({"render", file.string(), "-o", folder.path.string(), "--size", "8x8", "--kernel", "ao",
                       "--ao-radius", "1"}).exit_code == 0);
+}
+
+TEST_CASE("the trace readers refuse what is not a scene or a ray file, naming the file and the problem") {
+    temp_folder const folder("canopy_cli_hostile_test");
+    auto const& dir = folder.path;
+    folder.write("tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    fs::create_directory(dir / "folder.obj");
+    fs::create_directory(dir / "folder.rays");
+    fs::create_symlink("/dev/zero", dir / "zero.obj");
+    fs::create_symlink("/dev/zero", dir / "zero.inst");
+    fs::create_symlink("/dev/zero", dir / "zero.rays");
+    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
+    REQUIRE(::mkfifo((dir / "fifo.rays").c_str(), 0600) == 0);
+    // Random bytes (a NUL planted at offset 12 of the first line), UTF-16 with and without its
+    // byte-order mark, control bytes.
+    std::string random(4096, '\0');
+    std::mt19937 rng(15);
+    for (char& c : random) c = char(std::uniform_int_distribution<int>(32, 126)(rng));
+    random[12] = '\0';
+    folder.write("random.obj", random);
+    folder.write("utf16.obj", std::string("\xFF\xFE" "v\0 \0" "0\0", 8));
+    folder.write("utf16_plain.obj", std::string("v\0 \0" "0\0", 6));
+    folder.write("control.obj", "v 0 0 0\nv 1 \x01 0\n");
+    folder.write("empty.obj", "");
+    folder.write("vertices.obj", "v 0 0 0\nv 1 0 0\n# no faces\n");
+    folder.write("huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1e300 0\nf 1 2 3\n");
+    folder.write("self.inst", "# a mesh of itself\nmesh self.inst\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    folder.write("no_instances.inst", "mesh tri.obj\n# nothing else\n");
+    folder.write("faceless.inst", "mesh vertices.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    folder.write("folder_mesh.inst", "mesh folder.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    folder.write("zero_mesh.inst", "mesh zero.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    folder.write("huge.inst", "mesh tri.obj\n1 0 0 0 0 1 0 0 0 0 1 -1e39\n");
+    folder.write("odd.rays", std::string(33, '\0'));
+    folder.write("long.obj", "v 0 0 " + std::string(1 << 20, '7') + "x\n");
+
+    auto const p = [&](char const* name) { return (dir / name).string(); };
+    auto const message = [](auto&& read) -> std::string {
+        try {
+            read();
+        } catch (canopy::format_error const& e) {
+            return e.what();
+        }
+        return "(no format_error)";
+    };
+    struct bad_file {
+        char const* name;
+        std::string message;
+    };
+    for (auto const& [name, expected] : {
+             bad_file{"folder.obj", p("folder.obj") + ": is a folder, not a regular file"},
+             bad_file{"zero.obj", p("zero.obj") + ": is a character device, not a regular file"},
+             bad_file{"zero.inst", p("zero.inst") + ": is a character device, not a regular file"},
+             bad_file{"fifo.obj", p("fifo.obj") + ": is a FIFO, not a regular file"},
+             bad_file{"random.obj", p("random.obj") + ":1: not a text OBJ file: NUL byte at offset 12"},
+             bad_file{"utf16.obj", p("utf16.obj") + ": not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)"},
+             bad_file{"utf16_plain.obj", p("utf16_plain.obj") + ":1: not a text OBJ file: NUL byte at offset 1"},
+             bad_file{"control.obj", p("control.obj") + ":2: not a text OBJ file: control byte 0x01 at offset 12"},
+             bad_file{"empty.obj", p("empty.obj") + ": no faces ('f' lines) and no vertices: nothing to trace"},
+             bad_file{"vertices.obj", p("vertices.obj") + ": no faces ('f' lines): nothing to trace"},
+             bad_file{"huge.obj", p("huge.obj") + ":3: value 1e300 overflows a float"},
+             bad_file{"long.obj", p("long.obj") + ":1: bad number '" + std::string(40, '7') + "…'"},
+             bad_file{"self.inst", p("self.inst") + ": names itself as its mesh ('mesh self.inst'); the mesh is an .obj file"},
+             bad_file{"no_instances.inst", p("no_instances.inst") + ": no instance lines (12 numbers each): nothing to trace"},
+             bad_file{"faceless.inst", p("vertices.obj") + ": no faces ('f' lines): nothing to trace"},
+             bad_file{"folder_mesh.inst", p("folder.obj") + ": is a folder, not a regular file (mesh of folder_mesh.inst)"},
+             bad_file{"zero_mesh.inst", p("zero.obj") + ": is a character device, not a regular file (mesh of zero_mesh.inst)"},
+             bad_file{"huge.inst", p("huge.inst") + ":2: value -1e39 overflows a float"},
+         }) {
+        INFO(name);
+        fs::path const file = dir / name;
+        if (file.extension() == ".obj") CHECK(message([&] { canopy::read_bench_obj(file); }) == expected);
+        else CHECK(message([&] { canopy::read_bench_inst(file); }) == expected);
+    }
+    for (auto const& [name, expected] : {
+             bad_file{"folder.rays", p("folder.rays") + ": is a folder, not a regular file (ray file)"},
+             bad_file{"zero.rays", p("zero.rays") + ": is a character device, not a regular file (ray file)"},
+             bad_file{"fifo.rays", p("fifo.rays") + ": is a FIFO, not a regular file (ray file)"},
+             bad_file{"odd.rays", p("odd.rays") + ": size 33 bytes is not a multiple of 32 (one ray = 32 bytes)"},
+         }) {
+        INFO(name);
+        CHECK(message([&] { canopy::read_bench_rays(dir / name); }) == expected);
+    }
+    CHECK(message([&] { canopy::write_bench_hits(dir / "folder.rays", {}); }) ==
+          p("folder.rays") + ": cannot open file for writing: Is a directory");
+}
+
+TEST_CASE("canopy trace exits 1 with the reader's message for a file that is not a scene or a ray file") {
+    temp_folder const folder("canopy_cli_hostile_test");
+    auto const& dir = folder.path;
+    auto const obj = folder.write("tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    canopy::write_bench_rays(dir / "one.rays", {canopy::ray{{0.2f, 0.2f, -1.0f}, 0.0f, {0.0f, 0.0f, 1.0f}, inf}});
+    fs::create_directory(dir / "folder");
+    REQUIRE(::mkfifo((dir / "fifo.rays").c_str(), 0600) == 0);
+    folder.write("self.inst", "mesh self.inst\n1 0 0 0 0 1 0 0 0 0 1 0\n");
+    auto const p = [&](char const* name) { return (dir / name).string(); };
+    struct bad_call {
+        std::string scene, rays, out, message; // message: all the program writes
+    };
+    for (auto const& call : {
+             bad_call{p("folder"), p("one.rays"), p("out.hits"), p("folder") + ": is a folder, not a regular file"},
+             bad_call{p("self.inst"), p("one.rays"), p("out.hits"),
+                      p("self.inst") + ": names itself as its mesh ('mesh self.inst'); the mesh is an .obj file"},
+             bad_call{obj.string(), p("fifo.rays"), p("out.hits"), p("fifo.rays") + ": is a FIFO, not a regular file (ray file)"},
+             bad_call{obj.string(), p("one.rays"), p("folder"), p("folder") + ": cannot be written: Is a directory"},
+         }) {
+        INFO("--scene " << call.scene << " --rays " << call.rays << " --out " << call.out);
+        auto const result = run_canopy({"trace", "--scene", call.scene, "--rays", call.rays, "--query", "closest", "--out", call.out});
+        CHECK(result.exit_code == 1);
+        CHECK(result.output == "canopy: " + call.message + "\n");
+    }
+}
+
+TEST_CASE("canopy info and render refuse OBJ files that hold nothing to trace or are not text, exit 1") {
+    temp_folder const folder("canopy_cli_hostile_test");
+    auto const& dir = folder.path;
+    std::string random(2048, '\0');
+    std::mt19937 rng(1515);
+    for (char& c : random) c = char(std::uniform_int_distribution<int>(0, 255)(rng));
+    // The first byte that is not text, found here: a control byte other than tab, LF, VT, FF, CR.
+    std::size_t offset = 0, line = 1;
+    for (; offset < random.size(); ++offset) {
+        auto const c = static_cast<unsigned char>(random[offset]);
+        if (c == '\n') ++line;
+        else if ((c < 0x20 && c != '\t' && c != '\r' && c != '\v' && c != '\f') || c == 0x7F) break;
+    }
+    REQUIRE(offset < random.size());
+    char byte[8];
+    std::snprintf(byte, sizeof byte, "0x%02X", unsigned(static_cast<unsigned char>(random[offset])));
+    std::string const what = random[offset] == '\0' ? "NUL byte" : std::string("control byte ") + byte;
+    auto const garbage = folder.write("garbage.obj", random);
+    auto const points = folder.write("points.obj", "v 0 0 0\nv 1 0 0\np 1 2\n");
+    fs::create_symlink("/dev/zero", dir / "zero.obj");
+    auto const info = run_canopy({"info", garbage.string()});
+    CHECK(info.exit_code == 1);
+    CHECK(info.output == "canopy: " + garbage.string() + ":" + std::to_string(line) + ": not a text OBJ file: " + what +
+                             " at offset " + std::to_string(offset) + "\n");
+    auto const render = run_canopy({"render", points.string(), "-o", dir.string(), "--size", "8x8"});
+    CHECK(render.exit_code == 1);
+    CHECK(render.output == "canopy: " + points.string() + ": no faces ('f' lines), only points or lines: nothing to trace\n");
+    auto const zero = run_canopy({"info", (dir / "zero.obj").string()});
+    CHECK(zero.exit_code == 1);
+    CHECK(zero.output == "canopy: " + (dir / "zero.obj").string() + ": is a character device, not a regular file\n");
+}
+
+TEST_CASE("canopy info reports the non-convex polygon of more than 256 corners that had to be fanned") {
+    temp_folder const folder("canopy_cli_polygon_test");
+    // A simple comb of 300 corners in the plane z = 0: a zigzag top edge of 298 corners (heights
+    // 1 and 2, so non-convex) and two base corners; one face, on line 301.
+    std::string text;
+    for (int k = 0; k < 298; ++k) text += "v " + std::to_string(k) + " " + (k % 2 ? "1" : "2") + " 0\n";
+    text += "v 297 0 0\nv 0 0 0\nf";
+    for (int k = 1; k <= 300; ++k) text += " " + std::to_string(k);
+    text += "\n";
+    auto const comb = folder.write("comb.obj", text);
+    auto const result = run_canopy({"info", comb.string()});
+    INFO(result.output);
+    CHECK(result.exit_code == 0);
+    CHECK_THAT(result.output, Catch::Contains("(298 triangles stored)"));
+    CHECK_THAT(result.output,
+               Catch::Contains("  - 1 polygon faces fanned, not ear-clipped (self-intersecting, collinear, or non-convex "
+                               "with more than 256 corners): their triangles may cover more than the face; the first in "
+                               "mesh 'comb' (" + comb.string() + ":301)\n"));
 }

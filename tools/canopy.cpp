@@ -306,11 +306,11 @@ struct loaded_scene {
 
 std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path) {
     auto scene = std::make_unique<loaded_scene>();
+    canopy::require_regular_file(path); // a folder or a device is named as such, whatever its extension
     auto const ext = path.extension().string();
     if (ext != ".obj" && ext != ".inst")
         throw canopy::scene_error(path.string(), "", "unknown scene extension " + quote(ext) + " (expected .obj or .inst)");
     step("loading " + path.string());
-    canopy::require_regular_file(path, "scene");
     if (ext == ".obj") {
         auto const mesh = canopy::read_bench_obj(path);
         if (mesh.triangles.empty()) throw canopy::scene_error(path.string(), "", "holds no triangles: nothing to trace");

@@ -9,9 +9,18 @@
 //   .rays  32 bytes per ray: origin xyz, tmin, direction xyz, tmax (float32, little-endian).
 //   .hits  20 bytes per ray: t (+inf on miss), prim, inst (0xffffffff: none), u, v.
 //
-// Errors (format_error) name the file, the line where there is one, and the problem: faces with
-// more or fewer than 3 vertices, bad or non-finite numbers, out-of-range indices, a ray file whose
-// size is not a multiple of 32, unreadable files.
+// Only regular files are read (canopy.scene's require_regular_file: a folder, a device, a FIFO is
+// refused before it is opened), each whole and within the limit of bytes per file; counts are
+// checked against canopy::default_limits() as they grow (vertices and triangles: max_triangles,
+// instances: max_placements).
+//
+// Errors (format_error) name the file, the line where there is one, and the problem: text files
+// that are not text (a NUL or other control byte, a UTF-16/32 byte-order mark: "not a text OBJ
+// file: NUL byte at offset 12"), faces with more or fewer than 3 vertices, bad or non-finite
+// numbers, numbers that overflow a float ("value 1e300 overflows a float"), out-of-range indices,
+// files with nothing to trace (a mesh without faces, an .inst without instance lines), an .inst
+// naming itself as its mesh, a ray file whose size is not a multiple of 32, unreadable files and
+// files over a limit. Input quoted in a message is cut to a short prefix.
 module;
 #include <algorithm>
 #include <array>
@@ -24,13 +33,14 @@ module;
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <sstream>
+#include <new>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
 export module canopy.bench_formats;
 import canopy.intersector;
+import canopy.scene;
 
 export namespace canopy {
 
@@ -99,37 +109,58 @@ namespace detail {
     throw format_error(message + ": " + what);
 }
 
-inline std::string read_file(std::filesystem::path const& file) {
-    std::ifstream in(file, std::ios::binary);
-    if (!in) detail::fail(file, 0, "cannot open file");
-    std::ostringstream content;
-    content << in.rdbuf();
-    if (in.bad()) detail::fail(file, 0, "read error");
-    return std::move(content).str();
+// Runs f; a scene_error (from canopy.scene's checks) becomes a format_error with its message, and
+// running out of memory one naming the file.
+template <typename F>
+auto checked(std::filesystem::path const& file, F&& f) {
+    try {
+        return f();
+    } catch (scene_error const& e) {
+        throw format_error(e.what());
+    } catch (std::bad_alloc const&) {
+        fail(file, 0, "out of memory while reading");
+    }
 }
+
+inline std::string read_file(std::filesystem::path const& file, std::string const& role = {}) {
+    return checked(file, [&] { return read_regular_file(file, role); });
+}
+
+inline void limit(std::filesystem::path const& file, std::size_t line, std::uint64_t count, std::uint64_t max,
+                  char const* what, char const* option) {
+    checked(file, [&] { check_limit(file.string(), line ? std::to_string(line) : std::string(), count, max, what, option); });
+}
+
+inline bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
 
 // Splits s into whitespace-separated tokens.
 inline std::vector<std::string_view> tokens(std::string_view s) {
     std::vector<std::string_view> out;
     std::size_t i = 0;
     while (i < s.size()) {
-        while (i < s.size() && (s[i] == ' ' || s[i] == '\t' || s[i] == '\r')) ++i;
+        while (i < s.size() && is_space(s[i])) ++i;
         std::size_t const start = i;
-        while (i < s.size() && s[i] != ' ' && s[i] != '\t' && s[i] != '\r') ++i;
+        while (i < s.size() && !is_space(s[i])) ++i;
         if (i > start) out.push_back(s.substr(start, i - start));
     }
     return out;
 }
 
+// A number of the file as a float: finite, and finite once rounded to float (1e300 is a finite
+// double but overflows a float).
 inline float parse_float(std::string_view token, std::filesystem::path const& file, std::size_t line) {
     std::string const text(token);
     char* end = nullptr;
     errno = 0;
-    float const value = std::strtof(text.c_str(), &end);
-    if (end != text.c_str() + text.size() || text.empty())
-        fail(file, line, "bad number '" + text + "'");
-    if (!std::isfinite(value)) fail(file, line, "non-finite number '" + text + "'");
-    return value;
+    double const value = std::strtod(text.c_str(), &end);
+    bool const out_of_range = errno == ERANGE;
+    if (text.empty() || end != text.c_str() + text.size() || is_space(text.front()))
+        fail(file, line, "bad number '" + excerpt(token) + "'");
+    if (std::isnan(value) || (std::isinf(value) && !out_of_range))
+        fail(file, line, "non-finite number '" + excerpt(token) + "'");
+    float const rounded = float(value); // a value too small for a float rounds to (signed) zero
+    if (!std::isfinite(rounded)) fail(file, line, "value " + excerpt(token) + " overflows a float");
+    return rounded;
 }
 
 inline long parse_index(std::string_view token, std::filesystem::path const& file, std::size_t line) {
@@ -137,13 +168,13 @@ inline long parse_index(std::string_view token, std::filesystem::path const& fil
     char* end = nullptr;
     errno = 0;
     long const value = std::strtol(text.c_str(), &end, 10);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE)
-        fail(file, line, "bad vertex index '" + std::string(token) + "'");
+    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || is_space(text.front()))
+        fail(file, line, "bad vertex index '" + excerpt(token) + "'");
     return value;
 }
 
 template <typename F>
-void for_each_line(std::string const& content, F&& f) {
+void for_each_line(std::string_view content, F&& f) {
     std::size_t line = 0, pos = 0;
     while (pos <= content.size()) {
         std::size_t const end = std::min(content.find('\n', pos), content.size());
@@ -156,22 +187,31 @@ void for_each_line(std::string const& content, F&& f) {
     }
 }
 
+// Paths longer than this cannot name a file (Linux's PATH_MAX); longer ones are refused by length
+// rather than quoted whole in a "not found".
+inline constexpr std::size_t max_path_bytes = 4096;
+
 } // namespace detail
 
-inline bench_mesh read_bench_obj(std::filesystem::path const& file) {
-    std::string const content = detail::read_file(file);
+// The OBJ subset from text (no file is read; `file` names it in errors, also for fuzzing).
+inline bench_mesh parse_bench_obj(std::string_view content, std::filesystem::path const& file) {
+    detail::checked(file, [&] { require_text(content, file.string(), "OBJ"); });
+    std::uint64_t const max_triangles = default_limits().max_triangles;
     std::vector<vec3<float>> vertices;
     bench_mesh mesh;
+    std::vector<std::string_view> tok;
     detail::for_each_line(content, [&](std::size_t line, std::string_view text) {
-        auto const tok = detail::tokens(text);
+        tok = detail::tokens(text);
         if (tok.empty()) return;
         if (tok[0] == "v") {
             if (tok.size() < 4) detail::fail(file, line, "vertex needs 3 coordinates");
+            detail::limit(file, line, vertices.size() + 1, max_triangles, "vertices", "--max-triangles");
             vertices.emplace_back(detail::parse_float(tok[1], file, line), detail::parse_float(tok[2], file, line),
                                   detail::parse_float(tok[3], file, line));
         } else if (tok[0] == "f") {
             if (tok.size() != 4)
                 detail::fail(file, line, "face has " + std::to_string(tok.size() - 1) + " vertices; only triangles are supported");
+            detail::limit(file, line, mesh.triangles.size() + 1, max_triangles, "triangles", "--max-triangles");
             std::array<vec3<float>, 3> v;
             for (int k = 0; k < 3; ++k) {
                 long const index = detail::parse_index(tok[std::size_t(k + 1)], file, line);
@@ -186,48 +226,125 @@ inline bench_mesh read_bench_obj(std::filesystem::path const& file) {
             mesh.triangles.push_back(triangle{v[0], v[1], v[2], id, 0});
         }
     });
+    if (mesh.triangles.empty())
+        detail::fail(file, 0, vertices.empty() ? "no faces ('f' lines) and no vertices: nothing to trace"
+                                               : "no faces ('f' lines): nothing to trace");
     return mesh;
 }
 
-inline bench_instanced_scene read_bench_inst(std::filesystem::path const& file) {
+inline bench_mesh read_bench_obj(std::filesystem::path const& file) {
     std::string const content = detail::read_file(file);
-    bench_instanced_scene scene;
+    return detail::checked(file, [&] { return parse_bench_obj(content, file); });
+}
+
+// An .inst from text: its instances and its mesh's path (resolved against `file`'s folder); the
+// mesh is not read (mesh stays empty). Also for fuzzing.
+inline bench_instanced_scene parse_bench_inst(std::string_view content, std::filesystem::path const& file) {
+    detail::checked(file, [&] { require_text(content, file.string(), ".inst"); });
+    std::uint64_t const max_instances = default_limits().max_placements;
+    bench_instanced_scene out;
+    std::vector<std::string_view> tok;
     detail::for_each_line(content, [&](std::size_t line, std::string_view text) {
-        auto const tok = detail::tokens(text);
+        tok = detail::tokens(text);
         if (tok.empty()) return;
         if (tok[0] == "mesh") {
             if (tok.size() != 2) detail::fail(file, line, "expected 'mesh PATH'");
-            if (!scene.mesh_path.empty()) detail::fail(file, line, "a second 'mesh' line (one shared mesh only)");
+            if (!out.mesh_path.empty()) detail::fail(file, line, "a second 'mesh' line (one shared mesh only)");
+            if (tok[1].size() > detail::max_path_bytes)
+                detail::fail(file, line, "mesh path of " + std::to_string(tok[1].size()) + " bytes is too long ('" +
+                                             excerpt(tok[1]) + "')");
             std::filesystem::path p(tok[1]);
-            scene.mesh_path = p.is_absolute() ? p : file.parent_path() / p;
+            out.mesh_path = p.is_absolute() ? p : file.parent_path() / p;
             return;
         }
         if (tok.size() != 12)
             detail::fail(file, line, "instance line needs 12 numbers (3x4 row-major matrix), found " +
                                          std::to_string(tok.size()));
+        detail::limit(file, line, out.instances.size() + 1, max_instances, "instances", "--max-placements");
         std::array<float, 12> rows;
         for (std::size_t k = 0; k < 12; ++k) rows[k] = detail::parse_float(tok[k], file, line);
         auto const m = affine_transform<float>::from_rows(rows);
         if (determinant(m.linear) == 0.0f) detail::fail(file, line, "singular instance transform");
-        scene.instances.push_back(m);
+        out.instances.push_back(m);
     });
-    if (scene.mesh_path.empty()) detail::fail(file, 0, "no 'mesh' line");
-    scene.mesh = read_bench_obj(scene.mesh_path);
-    return scene;
+    if (out.mesh_path.empty()) detail::fail(file, 0, "no 'mesh' line");
+    if (out.instances.empty()) detail::fail(file, 0, "no instance lines (12 numbers each): nothing to trace");
+    return out;
 }
 
-inline std::vector<ray> read_bench_rays(std::filesystem::path const& file) {
+inline bench_instanced_scene read_bench_inst(std::filesystem::path const& file) {
     std::string const content = detail::read_file(file);
+    auto out = detail::checked(file, [&] { return parse_bench_inst(content, file); });
+    std::error_code ec;
+    if (std::filesystem::equivalent(out.mesh_path, file, ec))
+        detail::fail(file, 0, "names itself as its mesh ('mesh " + excerpt(out.mesh_path.filename().string()) +
+                                  "'); the mesh is an .obj file");
+    std::string const mesh_text = detail::read_file(out.mesh_path, "mesh of " + file.filename().string());
+    out.mesh = detail::checked(out.mesh_path, [&] { return parse_bench_obj(mesh_text, out.mesh_path); });
+    return out;
+}
+
+// Rays from the bytes of a ray file (`file` names it in errors).
+inline std::vector<ray> parse_bench_rays(std::string_view content, std::filesystem::path const& file) {
     if (content.size() % 32 != 0)
         detail::fail(file, 0, "size " + std::to_string(content.size()) + " bytes is not a multiple of 32 (one ray = 32 bytes)");
-    std::vector<ray> rays(content.size() / 32);
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-        float f[8];
-        std::memcpy(f, content.data() + 32 * i, sizeof f);
-        rays[i] = ray{vec3<float>(f[0], f[1], f[2]), f[3], vec3<float>(f[4], f[5], f[6]), f[7]};
+    return detail::checked(file, [&] {
+        std::vector<ray> rays(content.size() / 32);
+        for (std::size_t i = 0; i < rays.size(); ++i) {
+            float f[8];
+            std::memcpy(f, content.data() + 32 * i, sizeof f);
+            rays[i] = ray{vec3<float>(f[0], f[1], f[2]), f[3], vec3<float>(f[4], f[5], f[6]), f[7]};
+        }
+        return rays;
+    });
+}
+
+// A ray file, read in pieces straight into the rays (no second copy of the file in memory).
+inline std::vector<ray> read_bench_rays(std::filesystem::path const& file) {
+    std::uint64_t const size = detail::checked(file, [&] { return require_regular_file(file, "ray file"); });
+    if (size % 32 != 0)
+        detail::fail(file, 0, "size " + std::to_string(size) + " bytes is not a multiple of 32 (one ray = 32 bytes)");
+    std::ifstream in(file, std::ios::binary);
+    if (!in) detail::fail(file, 0, std::string("cannot be opened: ") + std::strerror(errno));
+    std::vector<ray> rays;
+    std::vector<char> piece;
+    detail::checked(file, [&] {
+        rays.resize(std::size_t(size / 32));
+        piece.resize(32 * 4096);
+    });
+    for (std::size_t first = 0; first < rays.size();) {
+        std::size_t const count = std::min<std::size_t>(4096, rays.size() - first);
+        in.read(piece.data(), std::streamsize(32 * count));
+        if (in.bad() || std::size_t(in.gcount()) != 32 * count)
+            detail::fail(file, 0, "read error after " + std::to_string(32 * first + std::size_t(in.gcount())) + " of " +
+                                      std::to_string(size) + " bytes");
+        for (std::size_t i = 0; i < count; ++i) {
+            float f[8];
+            std::memcpy(f, piece.data() + 32 * i, sizeof f);
+            rays[first + i] = ray{vec3<float>(f[0], f[1], f[2]), f[3], vec3<float>(f[4], f[5], f[6]), f[7]};
+        }
+        first += count;
     }
+    if (in.peek() != std::ifstream::traits_type::eof()) detail::fail(file, 0, "grew while it was being read");
     return rays;
 }
+
+namespace detail {
+
+// Writes `bytes` as the whole of `file`; a file that cannot be opened or written (a folder, a full
+// disk) is an error naming it.
+// Checked after closing: a full disk (or /dev/full) is an error with the system's reason.
+inline void write_file(std::filesystem::path const& file, std::string const& bytes) {
+    auto const reason = [] { return std::string(errno != 0 ? std::strerror(errno) : "unknown error"); };
+    errno = 0;
+    std::ofstream out(file, std::ios::binary | std::ios::trunc);
+    if (!out) fail(file, 0, "cannot open file for writing: " + reason());
+    out.write(bytes.data(), std::streamsize(bytes.size()));
+    out.close();
+    if (!out) fail(file, 0, "cannot write: " + reason());
+}
+
+} // namespace detail
 
 inline void write_bench_hits(std::filesystem::path const& file, std::vector<bench_hit> const& hits) {
     static_assert(std::endian::native == std::endian::little);
@@ -240,29 +357,29 @@ inline void write_bench_hits(std::filesystem::path const& file, std::vector<benc
         std::memcpy(p + 12, &hits[i].u, 4);
         std::memcpy(p + 16, &hits[i].v, 4);
     }
-    // Checked after closing: a full disk (or /dev/full) is an error with the system's reason.
-    auto const reason = [] { return std::string(errno != 0 ? std::strerror(errno) : "unknown error"); };
-    errno = 0;
-    std::ofstream out(file, std::ios::binary | std::ios::trunc);
-    if (!out) detail::fail(file, 0, "cannot open file for writing: " + reason());
-    out.write(buffer.data(), std::streamsize(buffer.size()));
-    out.close();
-    if (!out) detail::fail(file, 0, "cannot write: " + reason());
+    detail::write_file(file, buffer);
+}
+
+// Hits from the bytes of a hit file (`file` names it in errors).
+inline std::vector<bench_hit> parse_bench_hits(std::string_view content, std::filesystem::path const& file) {
+    if (content.size() % 20 != 0)
+        detail::fail(file, 0, "size " + std::to_string(content.size()) + " bytes is not a multiple of 20 (one hit = 20 bytes)");
+    return detail::checked(file, [&] {
+        std::vector<bench_hit> hits(content.size() / 20);
+        for (std::size_t i = 0; i < hits.size(); ++i) {
+            char const* p = content.data() + 20 * i;
+            std::memcpy(&hits[i].t, p + 0, 4);
+            std::memcpy(&hits[i].prim, p + 4, 4);
+            std::memcpy(&hits[i].inst, p + 8, 4);
+            std::memcpy(&hits[i].u, p + 12, 4);
+            std::memcpy(&hits[i].v, p + 16, 4);
+        }
+        return hits;
+    });
 }
 
 inline std::vector<bench_hit> read_bench_hits(std::filesystem::path const& file) {
-    std::string const content = detail::read_file(file);
-    if (content.size() % 20 != 0) detail::fail(file, 0, "size is not a multiple of 20 (one hit = 20 bytes)");
-    std::vector<bench_hit> hits(content.size() / 20);
-    for (std::size_t i = 0; i < hits.size(); ++i) {
-        char const* p = content.data() + 20 * i;
-        std::memcpy(&hits[i].t, p + 0, 4);
-        std::memcpy(&hits[i].prim, p + 4, 4);
-        std::memcpy(&hits[i].inst, p + 8, 4);
-        std::memcpy(&hits[i].u, p + 12, 4);
-        std::memcpy(&hits[i].v, p + 16, 4);
-    }
-    return hits;
+    return parse_bench_hits(detail::read_file(file, "hit file"), file);
 }
 
 inline void write_bench_rays(std::filesystem::path const& file, std::vector<ray> const& rays) {
@@ -272,14 +389,7 @@ inline void write_bench_rays(std::filesystem::path const& file, std::vector<ray>
                             rays[i].direction.x, rays[i].direction.y, rays[i].direction.z, rays[i].tmax};
         std::memcpy(buffer.data() + 32 * i, f, sizeof f);
     }
-    // Checked after closing: a full disk (or /dev/full) is an error with the system's reason.
-    auto const reason = [] { return std::string(errno != 0 ? std::strerror(errno) : "unknown error"); };
-    errno = 0;
-    std::ofstream out(file, std::ios::binary | std::ios::trunc);
-    if (!out) detail::fail(file, 0, "cannot open file for writing: " + reason());
-    out.write(buffer.data(), std::streamsize(buffer.size()));
-    out.close();
-    if (!out) detail::fail(file, 0, "cannot write: " + reason());
+    detail::write_file(file, buffer);
 }
 
 } // namespace canopy

@@ -13,11 +13,12 @@
 //          triangular `f` lines only; triangle i is the i-th `f` line (its prim_id).
 // Vertices are not shared between triangles (three per triangle, as the subset reader returns
 // them). Each file becomes a group named after it. Parameters: none.
-// Errors: whatever the format reader reports (faces that are not triangles, bad or non-finite
-// numbers, out-of-range indices, a missing or second `mesh` line, singular transforms,
-// unreadable files), as scene_error naming the file at fault (the .inst or its mesh) and the
-// line; and files that hold nothing to trace (a mesh without `f` lines, an .inst without
-// instance lines).
+// Errors: whatever the format reader reports (files that are not text, faces that are not
+// triangles, bad or non-finite numbers, numbers that overflow a float, out-of-range indices, a
+// missing or second `mesh` line, an .inst naming itself as its mesh, singular transforms, files
+// that hold nothing to trace: a mesh without `f` lines, an .inst without instance lines;
+// unreadable files, files over a limit), as scene_error naming the file at fault (the .inst or its
+// mesh) and the line.
 module;
 #include <cctype>
 #include <cstdint>
@@ -58,6 +59,9 @@ namespace {
 }
 
 mesh_data to_mesh(bench_mesh const& in, std::filesystem::path const& file) {
+    if (in.triangles.size() > (std::size_t(1) << 32) / 3 - 1)
+        throw scene_error(file.string(), "", std::to_string(in.triangles.size()) +
+                                                 " triangles: more than 32-bit vertex indices reach (three per triangle)");
     mesh_data m;
     m.name = file.filename().string();
     m.source = file.string();
@@ -78,8 +82,6 @@ node_id load_inst(scene& s, std::filesystem::path const& file, node_id parent, r
     } catch (format_error const& e) {
         rethrow(e, file);
     }
-    if (in.instances.empty()) throw scene_error(file.string(), "", "has no instance lines (12 numbers each)");
-    if (in.mesh.triangles.empty()) throw scene_error(in.mesh_path.string(), "", "has no triangles ('f' lines)");
     std::uint32_t const mesh = s.add_mesh(to_mesh(in.mesh, in.mesh_path));
     node_id const prototype = s.add_mesh_node(no_node, mesh, in.mesh_path.filename().string());
     s.at(prototype).source = file.string();
@@ -99,7 +101,6 @@ node_id load_obj(scene& s, std::filesystem::path const& file, node_id parent, re
     } catch (format_error const& e) {
         rethrow(e, file);
     }
-    if (in.triangles.empty()) throw scene_error(file.string(), "", "has no triangles ('f' lines)");
     std::uint32_t const mesh = s.add_mesh(to_mesh(in, file));
     node_id const group = s.add_group(parent, file.filename().string());
     s.at(group).source = file.string();

@@ -8,12 +8,10 @@ module;
 #include <cstdint>
 #include <exception>
 #include <filesystem>
-#include <fstream>
 #include <initializer_list>
 #include <limits>
 #include <map>
 #include <numbers>
-#include <sstream>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -85,12 +83,17 @@ public:
     node_id run(std::string_view text, node_id parent) {
         json doc;
         try {
-            doc = json::parse(text.begin(), text.end());
-        } catch (json::parse_error const& e) {
-            std::string what = e.what();
-            if (auto const close = what.find("] "); what.starts_with("[json.exception") && close != std::string::npos)
-                what = what.substr(close + 2);
-            throw scene_error(file_, "", what);
+            // Arrays and objects nested deeper than --max-depth are refused while parsing.
+            std::uint64_t const max_nesting = default_limits().max_depth;
+            doc = json::parse(text.begin(), text.end(), [&](int depth, json::parse_event_t event, json&) {
+                if ((event == json::parse_event_t::object_start || event == json::parse_event_t::array_start) &&
+                    std::uint64_t(depth) + 1 > max_nesting)
+                    check_limit(file_, "", std::uint64_t(depth) + 1, max_nesting, "levels of nested arrays and objects",
+                                "--max-depth");
+                return true;
+            });
+        } catch (json::exception const& e) { // syntax errors, numbers that overflow a double
+            throw scene_error(file_, "", parser_message(e.what()));
         }
         if (!doc.is_object()) fail("", "the document must be a JSON object, not " + type_name(doc));
         check_keys(doc, "", {"version", "materials", "meshes", "prototypes", "nodes"});
@@ -108,6 +111,17 @@ public:
     }
 
 private:
+    // nlohmann-json's message without its "[json.exception.…] " tag, and the input it quotes last
+    // ("…; last read: '<token>'", "number overflow parsing '<token>'") cut to a short prefix.
+    static std::string parser_message(std::string what) {
+        if (auto const close = what.find("] "); what.starts_with("[json.exception") && close != std::string::npos)
+            what = what.substr(close + 2);
+        std::size_t const open = what.find('\'');
+        if (what.ends_with('\'') && open != std::string::npos && open + 1 < what.size())
+            what = what.substr(0, open + 1) + excerpt(std::string_view(what).substr(open + 1, what.size() - open - 2)) + "'";
+        return what;
+    }
+
     [[noreturn]] void fail(std::string const& path, std::string const& problem) const {
         throw scene_error(file_, path, problem);
     }
@@ -136,7 +150,7 @@ private:
             if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
                 std::string list;
                 for (auto a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-                fail(at_key(path, key), "unknown key (known here: " + list + ")");
+                fail(at_key(path, excerpt(key)), "unknown key (known here: " + list + ")");
             }
     }
 
@@ -160,13 +174,15 @@ private:
         return j.get<std::string>();
     }
 
-    // A number that is finite as a float.
+    // A number that is finite as a float (1e300 is a finite double but overflows a float; a
+    // number too small for a float rounds to zero).
     float number(json const& j, std::string const& path) const {
         if (!j.is_number()) fail(path, "must be a number, not " + type_name(j));
         double const v = j.get<double>();
-        if (!std::isfinite(v) || std::abs(v) > double(std::numeric_limits<float>::max()))
-            fail(path, "value " + j.dump() + " is not finite as a float");
-        return float(v);
+        if (!std::isfinite(v)) fail(path, "value " + j.dump() + " is not finite");
+        float const rounded = float(v);
+        if (!std::isfinite(rounded)) fail(path, "value " + j.dump() + " overflows a float");
+        return rounded;
     }
 
     std::uint32_t index(json const& j, std::string const& path, std::uint64_t limit, std::string const& what) const {
@@ -191,7 +207,12 @@ private:
         return {v[0], v[1], v[2]};
     }
 
-    fs::path relative(std::string const& p) const { return folder_ / fs::path(p); }
+    // A file the scene names, relative to its folder; a name longer than any path can be
+    // (Linux's PATH_MAX) is refused by length rather than quoted whole.
+    fs::path relative(std::string const& p, std::string const& path) const {
+        if (p.size() > 4096) fail(path, "file name of " + std::to_string(p.size()) + " bytes is too long ('" + excerpt(p) + "')");
+        return folder_ / fs::path(p);
+    }
 
     registry const& plugins(std::string const& path, char const* what) const {
         if (r_ == nullptr) fail(path, std::string(what) + " needs a plugin registry (none was given)");
@@ -201,7 +222,7 @@ private:
     template <typename Map>
     std::string name_of(json const& e, std::string const& path, Map const& taken, char const* section) const {
         std::string name = string(required(e, "name", path), at_key(path, "name"));
-        if (taken.contains(name)) fail(at_key(path, "name"), std::string("duplicate ") + section + " name '" + name + "'");
+        if (taken.contains(name)) fail(at_key(path, "name"), std::string("duplicate ") + section + " name '" + excerpt(name) + "'");
         return name;
     }
 
@@ -218,7 +239,7 @@ private:
         if (json const* a = optional(e, "alphaMode", path)) {
             std::string const mode = string(*a, at_key(path, "alphaMode"));
             if (mode == "MASK") m.alpha = alpha_mode::mask;
-            else if (mode != "OPAQUE") fail(at_key(path, "alphaMode"), "'" + mode + "' is not OPAQUE or MASK");
+            else if (mode != "OPAQUE") fail(at_key(path, "alphaMode"), "'" + excerpt(mode) + "' is not OPAQUE or MASK");
         }
         if (json const* c = optional(e, "alphaCutoff", path)) {
             m.alpha_cutoff = number(*c, at_key(path, "alphaCutoff"));
@@ -228,7 +249,8 @@ private:
             std::string const p = at_key(path, "texture");
             std::string const texture = string(*t, p);
             registry const& r = plugins(p, "a texture");
-            m.image = at(p, [&] { return s_.add_image(r.load_image(relative(texture))); });
+            fs::path const file = relative(texture, p);
+            m.image = at(p, [&] { return s_.add_image(r.load_image(file)); });
         } else if (m.alpha == alpha_mode::mask) {
             fail(at_key(path, "alphaMode"), "MASK needs a texture (its alpha is the mask)");
         }
@@ -248,15 +270,22 @@ private:
             std::string loader;
             if (json const* l = optional(e, "loader", path)) loader = string(*l, at_key(path, "loader"));
             registry const& r = plugins(p, "a mesh file");
+            fs::path const mesh_file = relative(file, p);
             node_id const holder = s_.add_group(no_node, "mesh '" + name + "'");
-            entry.loaded = at(p, [&] { return r.load(s_, relative(file), holder, loader); });
+            entry.loaded = at(p, [&] { return r.load(s_, mesh_file, holder, loader); });
         } else {
             check_keys(e, path, {"name", "positions", "indices", "uvs", "material"});
             mesh_data m;
             m.name = name;
             m.source = file_;
             std::string const pp = at_key(path, "positions"), ip = at_key(path, "indices"), up = at_key(path, "uvs");
-            auto const positions = numbers(required(e, "positions", path), pp, 0);
+            // Counts against --max-triangles (vertices and triangles alike) before anything is built.
+            std::uint64_t const max_elements = default_limits().max_triangles;
+            json const& position_list = required(e, "positions", path);
+            if (position_list.is_array()) check_limit(file_, pp, position_list.size() / 3, max_elements, "vertices", "--max-triangles");
+            if (json const* i = optional(e, "indices", path); i != nullptr && i->is_array())
+                check_limit(file_, ip, i->size() / 3, max_elements, "triangles", "--max-triangles");
+            auto const positions = numbers(position_list, pp, 0);
             if (positions.size() % 3 != 0) fail(pp, "must hold 3 numbers per vertex (" + std::to_string(positions.size()) + " given)");
             for (std::size_t i = 0; i < positions.size(); i += 3)
                 m.positions.push_back({positions[i], positions[i + 1], positions[i + 2]});
@@ -281,7 +310,7 @@ private:
                 std::string const mp = at_key(path, "material");
                 std::string const mname = string(*mat, mp);
                 auto it = materials_.find(mname);
-                if (it == materials_.end()) fail(mp, "material '" + mname + "' is not defined");
+                if (it == materials_.end()) fail(mp, "material '" + excerpt(mname) + "' is not defined");
                 m.material = it->second;
             }
             entry.mesh = at(path, [&] { return s_.add_mesh(std::move(m)); });
@@ -373,7 +402,7 @@ private:
             fail(vp, "must be a string, number, boolean or an array of those, not " + type_name(v));
         };
         for (auto const& [key, value] : p->items()) {
-            std::string const vp = at_key(pp, key);
+            std::string const vp = at_key(pp, excerpt(key));
             if (value.is_array()) {
                 std::string joined;
                 for (std::size_t i = 0; i < value.size(); ++i) {
@@ -427,7 +456,7 @@ private:
             check_keys(e, path, {"type", "name", "mesh"});
             std::string const mesh = string(required(e, "mesh", path), at_key(path, "mesh"));
             auto it = meshes_.find(mesh);
-            if (it == meshes_.end()) fail(path, "mesh '" + mesh + "' is not defined");
+            if (it == meshes_.end()) fail(path, "mesh '" + excerpt(mesh) + "' is not defined");
             if (it->second.loaded == no_node) {
                 made = at(path, [&] { return s_.add_mesh_node(parent, it->second.mesh, name.empty() ? mesh : name); });
             } else {
@@ -438,7 +467,7 @@ private:
             check_keys(e, path, {"type", "name", "target", "id", "matrix", "translate", "rotate", "scale"});
             std::string const target = string(required(e, "target", path), at_key(path, "target"));
             auto it = prototypes_.find(target);
-            if (it == prototypes_.end()) fail(path, "instance target '" + target + "' is not defined");
+            if (it == prototypes_.end()) fail(path, "instance target '" + excerpt(target) + "' is not defined");
             std::uint32_t id = instances_;
             if (json const* i = optional(e, "id", path))
                 id = index(*i, at_key(path, "id"), std::uint64_t(std::numeric_limits<std::uint32_t>::max()) + 1, "ids are 32-bit");
@@ -459,7 +488,7 @@ private:
             if (json const* j = optional(e, "light", path)) {
                 std::string const kind = string(*j, at_key(path, "light"));
                 if (kind == "point") l.kind = light_data::point;
-                else if (kind != "directional") fail(at_key(path, "light"), "'" + kind + "' is not point or directional");
+                else if (kind != "directional") fail(at_key(path, "light"), "'" + excerpt(kind) + "' is not point or directional");
             }
             if (json const* j = optional(e, "position", path)) l.position = vec(*j, at_key(path, "position"));
             if (json const* j = optional(e, "direction", path)) {
@@ -475,14 +504,14 @@ private:
             std::string const generator = string(required(e, "generator", path), at_key(path, "generator"));
             parameters const p = params(e, path);
             registry const& r = plugins(path, "a generator");
-            if (!r.has_generator(generator)) fail(at_key(path, "generator"), "generator '" + generator + "' is not registered");
+            if (!r.has_generator(generator)) fail(at_key(path, "generator"), "generator '" + excerpt(generator) + "' is not registered");
             made = at(path, [&] { return r.generate(s_, generator, p, parent); });
             if (!name.empty() && made != no_node) s_.at(made).name = name;
         } else {
             check_keys(e, path, {"type", "name", "params"});
             parameters p = params(e, path);
             if (r_ == nullptr || !r_->has_node_type(type))
-                fail(at_key(path, "type"), "'" + type +
+                fail(at_key(path, "type"), "'" + excerpt(type) +
                                                "' is neither a built-in node type (group, transform, mesh, instance, "
                                                "camera, light, generator) nor one a plugin registers");
             made = at(path, [&] { return s_.add_custom(parent, type, std::move(p), name); });
@@ -517,7 +546,7 @@ node_id parse_json_scene(std::string_view text, std::string const& file_name, re
         throw;
     } catch (json::exception const& e) {
         s.roll_back(mark);
-        throw scene_error(file_name, "", e.what());
+        throw scene_error(file_name, "", excerpt(e.what(), 200));
     } catch (...) {
         s.roll_back(mark);
         throw;
@@ -530,13 +559,10 @@ node_id load_json_scene(scene& s, std::filesystem::path const& file, node_id par
     std::string const key = (ec ? file : canonical).string();
     if (std::find(files_in_progress.begin(), files_in_progress.end(), key) != files_in_progress.end())
         throw scene_error(file.string(), "", "the scene refers to itself (through the files it loads)");
-    std::ifstream in(file, std::ios::binary);
-    std::ostringstream content;
-    if (in) content << in.rdbuf();
-    if (!in || in.bad()) throw scene_error(file.string(), "", "cannot be read");
+    std::string const content = read_regular_file(file);
     files_in_progress.push_back(key);
     try {
-        node_id const n = parse_json_scene(content.str(), file.string(), &r, s, parent);
+        node_id const n = parse_json_scene(content, file.string(), &r, s, parent);
         files_in_progress.pop_back();
         return n;
     } catch (...) {

@@ -24,8 +24,11 @@
 //   "forest.json: nodes[3].children[1]: instance target 'oak' is not defined"
 //   "forest.json: materials[0].alphaCutoff: must be a number in [0, 1]"
 // for unknown names, duplicate names, wrong types, missing required keys, unknown keys, values
-// that are not finite as floats; JSON syntax errors keep the parser's line and column; errors in
-// files the scene refers to are wrapped with the element that refers to them.
+// that are not finite or overflow a float ("value 1e+300 overflows a float"), inline meshes whose
+// counts exceed --max-triangles (checked before they are built), arrays and objects nested deeper
+// than --max-depth; JSON syntax errors keep the parser's line and column; errors in files the
+// scene refers to are wrapped with the element that refers to them. Only regular files are read
+// (the scene, its mesh files, its textures). Input quoted in a message is cut to a short prefix.
 module;
 #include <filesystem>
 #include <string>

@@ -10,12 +10,11 @@ module;
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
-#include <fstream>
 #include <iterator>
 #include <limits>
 #include <map>
 #include <optional>
-#include <sstream>
+#include <set>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -70,37 +69,41 @@ std::string_view rest_from(std::string_view line, std::string_view token) {
     return trim(line.substr(std::size_t(token.data() - line.data())));
 }
 
-// Calls f(line number, line without its comment) for each line; refuses text that is not
-// ASCII / UTF-8 (a UTF-16 byte-order mark, NUL bytes).
+// Calls f(line number, line without its comment) for each line; refuses what is not text
+// (canopy.scene's require_text: "not a text OBJ file: NUL byte at offset 12", a UTF-16 byte-order
+// mark). `format` is "OBJ" or "MTL".
 template <typename F>
-void for_each_line(std::string_view text, std::string const& file, F&& f) {
-    if (text.size() >= 2 && ((text[0] == '\xFE' && text[1] == '\xFF') || (text[0] == '\xFF' && text[1] == '\xFE')))
-        fail(file, 0, "is UTF-16 text; only ASCII or UTF-8 is read");
+void for_each_line(std::string_view text, std::string const& file, char const* format, F&& f) {
+    require_text(text, file, format);
     if (text.starts_with("\xEF\xBB\xBF")) text.remove_prefix(3);
     std::size_t line = 0, pos = 0;
     while (pos < text.size()) {
         std::size_t const end = std::min(text.find('\n', pos), text.size());
         ++line;
         std::string_view content = text.substr(pos, end - pos);
-        if (content.find('\0') != std::string_view::npos) fail(file, line, "holds a NUL byte: not a text file");
         if (auto const hash = content.find('#'); hash != std::string_view::npos) content = content.substr(0, hash);
         f(line, content);
         pos = end + 1;
     }
 }
 
+// A number as a float: finite, and finite once rounded to float (1e300 is a finite double but
+// overflows a float). A number too small for a float rounds to (signed) zero.
 float parse_float(std::string_view token, std::string const& file, std::size_t line) {
     std::string_view t = token;
     if (t.size() > 1 && t[0] == '+' && t[1] != '+' && t[1] != '-') t.remove_prefix(1);
     double value = 0.0;
     auto const [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
-    if (ec == std::errc::result_out_of_range)
-        fail(file, line, "number '" + std::string(token) + "' is out of range");
-    if (ec != std::errc{} || end != t.data() + t.size()) fail(file, line, "bad number '" + std::string(token) + "'");
-    if (!std::isfinite(value)) fail(file, line, "number '" + std::string(token) + "' is not finite");
-    if (std::abs(value) > double(std::numeric_limits<float>::max()))
-        fail(file, line, "number '" + std::string(token) + "' is out of range for a float");
-    return float(value);
+    if ((ec != std::errc{} && ec != std::errc::result_out_of_range) || end != t.data() + t.size())
+        fail(file, line, "bad number '" + excerpt(token) + "'");
+    if (ec == std::errc::result_out_of_range) { // beyond double: too large, or too small (→ 0)
+        value = std::strtod(std::string(t).c_str(), nullptr);
+        if (std::isinf(value)) fail(file, line, "value " + excerpt(token) + " overflows a float");
+    }
+    if (!std::isfinite(value)) fail(file, line, "number '" + excerpt(token) + "' is not finite");
+    float const rounded = float(value);
+    if (!std::isfinite(rounded)) fail(file, line, "value " + excerpt(token) + " overflows a float");
+    return rounded;
 }
 
 // Reads `count_min`..`count_max` numbers from tokens[1..].
@@ -109,7 +112,7 @@ std::size_t parse_floats(std::vector<std::string_view> const& tokens, std::size_
                          std::string const& file, std::size_t line, char const* expected) {
     std::size_t const n = tokens.size() - 1;
     if (n < count_min || n > N)
-        fail(file, line, "'" + std::string(tokens[0]) + "' needs " + expected + ", found " + std::to_string(n) + " values");
+        fail(file, line, "'" + excerpt(tokens[0]) + "' needs " + expected + ", found " + std::to_string(n) + " values");
     for (std::size_t k = 0; k < n; ++k) out[k] = parse_float(tokens[k + 1], file, line);
     return n;
 }
@@ -122,7 +125,7 @@ std::uint32_t resolve_index(std::string_view token, std::string_view whole, std:
     std::int64_t value = 0;
     auto const [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
     if (t.empty() || ec != std::errc{} || end != t.data() + t.size())
-        fail(file, line, std::string("bad ") + what + " index '" + std::string(token) + "' in corner '" + std::string(whole) + "'");
+        fail(file, line, std::string("bad ") + what + " index '" + excerpt(token) + "' in corner '" + excerpt(whole) + "'");
     if (value == 0) fail(file, line, std::string(what) + " index 0 is not valid (OBJ indices start at 1)");
     auto const n = std::int64_t(count);
     std::int64_t const resolved = value > 0 ? value - 1 : n + value;
@@ -141,18 +144,17 @@ struct bucket {
     std::string material;
     std::vector<std::array<corner, 3>> triangles;
     bool any_uv = false, any_normal = false;
+    std::size_t fanned_faces = 0; // triangulate_polygon's fallback: fanned, may cover more than the face
+    std::size_t first_fanned_line = 0;
 };
 
-std::string read_text_file(fs::path const& p, std::string const& asking_file, std::size_t line, char const* what) {
-    std::error_code ec;
-    auto const st = fs::status(p, ec);
-    if (!fs::exists(st)) fail(asking_file, line, std::string(what) + " '" + p.string() + "' not found");
-    if (!fs::is_regular_file(st)) fail(asking_file, line, std::string(what) + " '" + p.string() + "' is not a regular file");
-    std::ifstream in(p, std::ios::binary);
-    std::ostringstream content;
-    if (in) content << in.rdbuf();
-    if (!in || in.bad()) fail(asking_file, line, std::string(what) + " '" + p.string() + "' cannot be read");
-    return std::move(content).str();
+// Paths longer than this cannot name a file (Linux's PATH_MAX): refused by length, not quoted whole.
+constexpr std::size_t max_path_bytes = 4096;
+
+void check_path_length(std::string_view path, std::string const& file, std::size_t line, char const* what) {
+    if (path.size() > max_path_bytes)
+        fail(file, line, std::string(what) + " name of " + std::to_string(path.size()) + " bytes is too long ('" +
+                             excerpt(path) + "')");
 }
 
 // A texture statement's file, after its options. Options that change the lookup are refused.
@@ -168,16 +170,17 @@ std::string texture_path(std::string_view line, std::vector<std::string_view> co
         else if (option == "-mm")
             arguments = 2;
         else if (option == "-o" || option == "-s" || option == "-t" || option == "-clamp" || option == "-imfchan")
-            fail(file, line_number, "texture option " + std::string(option) + " is not supported");
+            fail(file, line_number, "texture option " + excerpt(option) + " is not supported");
         else
-            fail(file, line_number, "unknown texture option " + std::string(option));
+            fail(file, line_number, "unknown texture option " + excerpt(option));
         if (k + arguments >= tokens.size())
-            fail(file, line_number, "texture option " + std::string(option) + " needs " + std::to_string(arguments) +
+            fail(file, line_number, "texture option " + excerpt(option) + " needs " + std::to_string(arguments) +
                                         " value" + (arguments == 1 ? "" : "s") + " and a file name");
         k += 1 + arguments;
     }
-    if (k >= tokens.size()) fail(file, line_number, "'" + std::string(tokens[0]) + "' needs a file name");
+    if (k >= tokens.size()) fail(file, line_number, "'" + excerpt(tokens[0]) + "' needs a file name");
     std::string path(rest_from(line, tokens[k]));
+    check_path_length(path, file, line_number, "texture file");
     std::replace(path.begin(), path.end(), '\\', '/');
     return path;
 }
@@ -189,7 +192,7 @@ std::optional<image_data> material_texture(mtl_material const& m, fs::path const
         try {
             return r.load_image(mtl_file.parent_path() / fs::path(relative));
         } catch (scene_error const& e) {
-            fail(mtl_file.string(), line, "texture '" + relative + "': " + e.what());
+            fail(mtl_file.string(), line, "texture '" + excerpt(relative) + "': " + e.what());
         }
     };
     std::optional<image_data> colour, alpha;
@@ -197,7 +200,7 @@ std::optional<image_data> material_texture(mtl_material const& m, fs::path const
     if (!m.alpha_texture.empty()) alpha = load(m.alpha_texture, m.alpha_texture_line);
     auto const valid = [&](image_data const& img, std::size_t line) {
         if (img.width <= 0 || img.height <= 0 || img.texels.size() != std::size_t(img.width) * std::size_t(img.height))
-            fail(mtl_file.string(), line, "texture '" + img.source + "' has no texels");
+            fail(mtl_file.string(), line, "texture '" + excerpt(img.source) + "' has no texels");
     };
     if (colour) valid(*colour, m.colour_texture_line);
     if (alpha) valid(*alpha, m.alpha_texture_line);
@@ -234,29 +237,31 @@ vec3<float> geometric_normal(vec3<float> a, vec3<float> b, vec3<float> c) {
 
 class obj_parser {
 public:
-    obj_parser(std::string const& file, registry const* r, scene& s) : file_(file), r_(r), s_(s) {}
+    obj_parser(std::string const& file, registry const* r, scene& s)
+        : file_(file), r_(r), s_(s), max_elements_(std::min<std::uint64_t>(default_limits().max_triangles, absent - 1)) {}
 
     node_id run(std::string_view text, node_id parent) {
         std::vector<std::string_view> tokens;
         std::vector<corner> face;
-        for_each_line(text, file_, [&](std::size_t line, std::string_view content) {
+        bool any_statement = false, points_or_lines = false; // of OBJ's geometry and grouping statements
+        for_each_line(text, file_, "OBJ", [&](std::size_t line, std::string_view content) {
             split(content, tokens);
             if (tokens.empty()) return;
             std::string_view const op = tokens[0];
             if (op == "v") {
                 std::array<float, 7> c{};
                 parse_floats(tokens, 3, c, file_, line, "3 to 7 numbers (x y z [w] or x y z r g b [a])");
-                if (positions_.size() >= absent - 1) fail(file_, line, "too many vertices");
+                grow(positions_.size(), line, "vertices");
                 positions_.push_back({c[0], c[1], c[2]});
             } else if (op == "vt") {
                 std::array<float, 3> c{};
                 parse_floats(tokens, 1, c, file_, line, "1 to 3 numbers (u [v [w]])");
-                if (uvs_.size() >= absent - 1) fail(file_, line, "too many texture coordinates");
+                grow(uvs_.size(), line, "texture coordinates");
                 uvs_.push_back({c[0], 1.0f - c[1]});
             } else if (op == "vn") {
                 std::array<float, 3> c{};
                 parse_floats(tokens, 3, c, file_, line, "3 numbers (x y z)");
-                if (normals_.size() >= absent - 1) fail(file_, line, "too many normals");
+                grow(normals_.size(), line, "normals");
                 normals_.push_back({c[0], c[1], c[2]});
             } else if (op == "f") {
                 read_face(tokens, face, line);
@@ -264,12 +269,28 @@ public:
                 use_material(std::string(rest_after(content, op)));
             } else if (op == "mtllib") {
                 read_libraries(content, tokens, line);
+            } else if (op == "l" || op == "p") {
+                points_or_lines = true;
+            } else if (!(op == "o" || op == "g" || op == "s" || op == "vp")) {
+                return;
             }
+            any_statement = true;
         });
+        if (triangles_ == 0)
+            fail(file_, 0, text.find_first_not_of(" \t\r\n\v\f") == std::string_view::npos ? "is empty: nothing to trace"
+                           : !any_statement   ? "not an OBJ file: no OBJ statement (v, f, ...) in it, nothing to trace"
+                           : points_or_lines ? "no faces ('f' lines), only points or lines: nothing to trace"
+                                             : "no faces ('f' lines): nothing to trace");
         return build(parent);
     }
 
 private:
+    // Vertices, texture coordinates, normals and triangles each up to --max-triangles (and 32-bit
+    // indices), checked as they grow.
+    void grow(std::uint64_t count, std::size_t line, char const* what, std::uint64_t added = 1) const {
+        check_limit(file_, std::to_string(line), count + added, max_elements_, what, "--max-triangles");
+    }
+
     void use_material(std::string name) {
         auto [it, inserted] = bucket_of_.try_emplace(name, buckets_.size());
         if (inserted) buckets_.push_back({std::move(name), {}, false, false});
@@ -285,7 +306,7 @@ private:
             std::size_t const slash1 = token.find('/');
             std::size_t const slash2 = slash1 == std::string_view::npos ? slash1 : token.find('/', slash1 + 1);
             if (slash2 != std::string_view::npos && token.find('/', slash2 + 1) != std::string_view::npos)
-                fail(file_, line, "corner '" + std::string(token) + "' has more than three parts");
+                fail(file_, line, "corner '" + excerpt(token) + "' has more than three parts");
             corner c;
             c.v = resolve_index(token.substr(0, slash1), token, positions_.size(), "vertex", "vertices", file_, line);
             if (slash1 != std::string_view::npos) {
@@ -293,15 +314,17 @@ private:
                                                                                                       : slash2 - slash1 - 1);
                 if (!vt.empty()) c.vt = resolve_index(vt, token, uvs_.size(), "texture coordinate", "texture coordinates", file_, line);
                 else if (slash2 == std::string_view::npos)
-                    fail(file_, line, "corner '" + std::string(token) + "' has an empty texture coordinate index");
+                    fail(file_, line, "corner '" + excerpt(token) + "' has an empty texture coordinate index");
                 if (slash2 != std::string_view::npos)
                     c.vn = resolve_index(token.substr(slash2 + 1), token, normals_.size(), "normal", "normals", file_, line);
             }
             if (!face.empty() && ((c.vt == absent) != (face[0].vt == absent) || (c.vn == absent) != (face[0].vn == absent)))
-                fail(file_, line, "corner '" + std::string(token) + "' has another form than the face's first corner '" +
-                                      std::string(tokens[1]) + "'");
+                fail(file_, line, "corner '" + excerpt(token) + "' has another form than the face's first corner '" +
+                                      excerpt(tokens[1]) + "'");
             face.push_back(c);
         }
+        grow(triangles_, line, "triangles", face.size() - 2);
+        triangles_ += face.size() - 2;
         if (current_ == absent) use_material({});
         bucket& b = buckets_[current_];
         b.any_uv = b.any_uv || face[0].vt != absent;
@@ -312,9 +335,13 @@ private:
         }
         points_.clear();
         for (corner const& c : face) points_.push_back(positions_[c.v]);
-        for (auto const& t : triangulate_polygon(points_).triangles) b.triangles.push_back({face[t[0]], face[t[1]], face[t[2]]});
+        polygon_triangles const cut = triangulate_polygon(points_);
+        if (cut.fanned_fallback && b.fanned_faces++ == 0) b.first_fanned_line = line;
+        for (auto const& t : cut.triangles) b.triangles.push_back({face[t[0]], face[t[1]], face[t[2]]});
     }
 
+    // Each library is read once, however often `mtllib` names it (the first definition of a
+    // material wins, so reading it again would add nothing).
     void read_libraries(std::string_view content, std::vector<std::string_view> const& tokens, std::size_t line) {
         if (tokens.size() < 2) fail(file_, line, "'mtllib' needs a file name");
         fs::path const folder = fs::path(file_).parent_path();
@@ -322,7 +349,7 @@ private:
         std::string whole(rest_after(content, tokens[0]));
         std::replace(whole.begin(), whole.end(), '\\', '/');
         std::error_code ec;
-        if (tokens.size() > 2 && fs::is_regular_file(folder / whole, ec)) names.push_back(whole);
+        if (tokens.size() > 2 && whole.size() <= max_path_bytes && fs::is_regular_file(folder / whole, ec)) names.push_back(whole);
         else
             for (std::size_t k = 1; k < tokens.size(); ++k) {
                 std::string name(tokens[k]);
@@ -330,8 +357,16 @@ private:
                 names.push_back(std::move(name));
             }
         for (auto const& name : names) {
+            check_path_length(name, file_, line, "material library");
             fs::path const library = folder / fs::path(name);
-            std::string const text = read_text_file(library, file_, line, "material library");
+            auto const canonical = fs::weakly_canonical(library, ec);
+            if (!libraries_read_.insert((ec ? library.lexically_normal() : canonical).string()).second) continue;
+            std::string text;
+            try {
+                text = read_regular_file(library);
+            } catch (scene_error const& e) {
+                fail(file_, line, "material library '" + excerpt(name) + "': " + e.problem());
+            }
             for (auto& m : parse_mtl(text, library.string())) {
                 std::string key = m.name;
                 materials_.try_emplace(std::move(key), std::move(m), library); // the first definition wins
@@ -347,14 +382,22 @@ private:
         md.name = m.name;
         if (m.colour) md.colour = *m.colour;
         else if (!m.colour_texture.empty()) md.colour = {1.0f, 1.0f, 1.0f};
-        if (r_ != nullptr) {
-            bool mask = false;
-            if (auto img = material_texture(m, library, *r_, mask)) {
-                md.image = s_.add_image(std::move(*img));
-                if (mask) {
-                    md.alpha = alpha_mode::mask;
-                    md.alpha_cutoff = 0.5f;
-                }
+        if (r_ != nullptr && (!m.colour_texture.empty() || !m.alpha_texture.empty())) {
+            // Materials naming the same texture files share one image.
+            fs::path const folder = library.parent_path();
+            std::pair<std::string, std::string> key{
+                m.colour_texture.empty() ? std::string() : (folder / m.colour_texture).lexically_normal().string(),
+                m.alpha_texture.empty() ? std::string() : (folder / m.alpha_texture).lexically_normal().string()};
+            auto shared = images_.find(key);
+            if (shared == images_.end()) {
+                bool mask = false;
+                std::optional<image_data> img = material_texture(m, library, *r_, mask);
+                shared = images_.emplace(std::move(key), std::pair{img ? s_.add_image(std::move(*img)) : -1, mask}).first;
+            }
+            md.image = shared->second.first;
+            if (md.image >= 0 && shared->second.second) {
+                md.alpha = alpha_mode::mask;
+                md.alpha_cutoff = 0.5f;
             }
         }
         return s_.add_material(std::move(md));
@@ -365,9 +408,12 @@ private:
         node_id const group = s_.add_group(parent, stem);
         std::vector<std::uint32_t> local(positions_.size(), absent);
         for (bucket& b : buckets_) {
+            if (b.triangles.empty()) continue; // a `usemtl` no face follows
             mesh_data m;
             m.name = b.material.empty() && bucket_of_.size() == 1 ? stem : b.material;
             m.source = file_;
+            m.fanned_faces = b.fanned_faces;
+            if (b.fanned_faces > 0) m.first_fanned = std::to_string(b.first_fanned_line);
             m.triangles.reserve(b.triangles.size());
             for (auto const& t : b.triangles) {
                 std::array<std::uint32_t, 3> tri{};
@@ -416,6 +462,10 @@ private:
     std::map<std::string, std::size_t> bucket_of_;
     std::size_t current_ = absent;
     std::map<std::string, std::pair<mtl_material, fs::path>> materials_;
+    std::set<std::string> libraries_read_;
+    std::map<std::pair<std::string, std::string>, std::pair<int, bool>> images_; // (map_Kd, map_d) → image, mask
+    std::uint64_t const max_elements_;
+    std::uint64_t triangles_ = 0;
 };
 
 } // namespace
@@ -423,7 +473,7 @@ private:
 std::vector<mtl_material> parse_mtl(std::string_view text, std::string const& file_name) {
     std::vector<mtl_material> out;
     std::vector<std::string_view> tokens;
-    for_each_line(text, file_name, [&](std::size_t line, std::string_view content) {
+    for_each_line(text, file_name, "MTL", [&](std::size_t line, std::string_view content) {
         split(content, tokens);
         if (tokens.empty()) return;
         std::string_view const op = tokens[0];
@@ -436,11 +486,11 @@ std::vector<mtl_material> parse_mtl(std::string_view text, std::string const& fi
         bool const kd = equals_ignoring_case(op, "Kd"), map_kd = equals_ignoring_case(op, "map_Kd"),
                    map_d = equals_ignoring_case(op, "map_d");
         if (!kd && !map_kd && !map_d) return;
-        if (out.empty()) fail(file_name, line, "'" + std::string(op) + "' before any 'newmtl'");
+        if (out.empty()) fail(file_name, line, "'" + excerpt(op) + "' before any 'newmtl'");
         mtl_material& m = out.back();
         if (kd) {
             if (tokens.size() > 1 && (equals_ignoring_case(tokens[1], "spectral") || equals_ignoring_case(tokens[1], "xyz")))
-                fail(file_name, line, "'Kd " + std::string(tokens[1]) + "' is not supported; give r g b");
+                fail(file_name, line, "'Kd " + excerpt(tokens[1]) + "' is not supported; give r g b");
             std::array<float, 3> c{};
             std::size_t const n = parse_floats(tokens, 1, c, file_name, line, "1 or 3 numbers (r [g b])");
             if (n == 2) fail(file_name, line, "'Kd' needs 1 or 3 numbers (r [g b]), found 2 values");
@@ -473,7 +523,7 @@ node_id parse_obj(std::string_view text, std::string const& file_name, registry 
 }
 
 node_id load_obj(scene& s, std::filesystem::path const& file, node_id parent, registry const& r) {
-    std::string const text = read_text_file(file, file.string(), 0, "file");
+    std::string const text = read_regular_file(file);
     return parse_obj(text, file.string(), &r, s, parent);
 }
 

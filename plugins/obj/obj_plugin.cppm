@@ -32,10 +32,18 @@
 // Texture paths: backslashes are read as folder separators. Options -blendu -blendv -bm -boost
 // -cc -mm -texres are skipped; -o -s -t -clamp -imfchan change the lookup and are errors.
 //
-// Errors (scene_error, "file:line: problem"): bad or non-finite numbers, zero or out-of-range
-// indices, faces with fewer than 3 corners, corners of mixed forms, a missing or unreadable
-// material library (named with the .obj line that asks for it), a texture that does not load
-// (named with its .mtl line), UTF-16 or binary (NUL byte) input.
+// Only regular files are read (canopy.scene's read_regular_file: a folder, a device or a FIFO is
+// named before it is opened); a library is read once however often `mtllib` names it, and
+// materials naming the same texture files share one image. A polygon face fanned by
+// triangulate_polygon's fallback is counted in mesh_data::fanned_faces (compile() reports it).
+//
+// Errors (scene_error, "file:line: problem"; input quoted by a short prefix): bad or non-finite
+// numbers, numbers that overflow a float ("value 1e300 overflows a float"), zero or out-of-range
+// indices, faces with fewer than 3 corners, corners of mixed forms, a missing, unreadable or
+// non-regular material library (named with the .obj line that asks for it), a texture that does
+// not load (named with its .mtl line), input that is not text ("not a text OBJ file: NUL byte at
+// offset 12", a UTF-16 byte-order mark), a file without faces (nothing to trace), vertices, texture
+// coordinates, normals or triangles over --max-triangles.
 module;
 #include <array>
 #include <cstddef>

@@ -1141,6 +1141,8 @@ openmesh_read_result read_checked(std::filesystem::path const& path) {
         for (int v : r.corners) points.push_back(out.positions[std::size_t(v)]);
         polygon_triangles const cut = triangulate_polygon(points);
         result.concave_polygons += cut.ear_clipped;
+        if (cut.fanned_fallback && out.fanned_faces++ == 0)
+            out.first_fanned = "face " + std::to_string(std::size_t(&r - faces.data()));
         for (auto const& t : cut.triangles) emit(t);
     }
     return result;
