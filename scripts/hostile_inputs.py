@@ -188,9 +188,10 @@ def build(d, canopy):
             os.path.basename(target))
         # glTF buffer uri
         doc = gltf_doc()
-        doc["buffers"][0]["uri"] = target
+        os.symlink(target, j("%s_buf.bin" % k))   # glTF URIs are relative to the file
+        doc["buffers"][0]["uri"] = "%s_buf.bin" % k
         write(j("%s_buf.gltf" % k), json.dumps(doc))
-        add("special-gltf-buffer-%s" % k, ["info", j("%s_buf.gltf" % k)], "error", kind_re[k], os.path.basename(target))
+        add("special-gltf-buffer-%s" % k, ["info", j("%s_buf.gltf" % k)], "error", kind_re[k], "%s_buf.bin" % k)
 
     # plugins that are not plugins
     write(j("random.so"), bytes(rng.getrandbits(8) for _ in range(4096)))
@@ -232,12 +233,15 @@ def build(d, canopy):
             add("deep-gltf-chain-%d" % n, ["info", j("chain%d.gltf" % n)], "error", "max-depth", "chain%d.gltf" % n)
         else:
             add("deep-gltf-chain-%d" % n, ["info", j("chain%d.gltf" % n)], "ok", r"graph:")
-    for n in [40000, 2000]:
+    for n in [40000, 3000, 1000]:
         protos = [{"name": "p%d" % i, "type": "instance", "target": "p%d" % (i + 1)} for i in range(n - 1)]
         protos.append({"name": "p%d" % (n - 1), "type": "mesh", "mesh": "t"})
         write(j("protochain%d.json" % n), json_scene([{"type": "instance", "target": "p0"}], prototypes=protos))
-        add("deep-json-prototypes-%d" % n, ["info", j("protochain%d.json" % n)], "error", "max-depth",
-            "protochain%d.json" % n)
+        if n > 2048:  # each prototype of the chain adds two levels: over 4096
+            add("deep-json-prototypes-%d" % n, ["info", j("protochain%d.json" % n)], "error", "max-depth",
+                "protochain%d.json" % n)
+        else:
+            add("deep-json-prototypes-%d" % n, ["info", j("protochain%d.json" % n)], "ok", "1 placements")
     for n in [100000, 5000]:
         write(j("nest%d.json" % n), "[" * n + "]" * n)
         add("deep-json-arrays-%d" % n, ["info", j("nest%d.json" % n)], "error", "max-depth|nest", "nest%d.json" % n)
@@ -245,10 +249,8 @@ def build(d, canopy):
         add("deep-json-objects-%d" % n, ["info", j("nestobj%d.json" % n)], "error", "max-depth|nest", "nestobj%d.json" % n)
         write(j("nest%d.gltf" % n), '{"asset":{"version":"2.0"},"extras":' + "[" * n + "]" * n + "}")
         add("deep-gltf-arrays-%d" % n, ["info", j("nest%d.gltf" % n)], "error", "max-depth|nest|depth", "nest%d.gltf" % n)
-    node = {"type": "mesh", "mesh": "t"}
-    for _ in range(6000):
-        node = {"type": "group", "children": [node]}
-    write(j("groups6000.json"), json_scene([node]))
+    deep = '{"type": "group", "children": [' * 6000 + '{"type": "mesh", "mesh": "t"}' + "]}" * 6000
+    write(j("groups6000.json"), json_scene(["@@"]).replace('"@@"', deep))
     add("deep-json-groups-6000", ["info", j("groups6000.json")], "error", "max-depth", "groups6000.json")
     add("deep-json-groups-max-depth-10", ["info", j("chain3000.gltf"), "--max-depth", "10"], "error", "max-depth",
         "chain3000.gltf")
@@ -296,8 +298,8 @@ def build(d, canopy):
         f.write("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
         for i in range(10**5):
             f.write("usemtl m%d\nf 1 2 3\n" % i)
-    add("fanout-obj-100k-usemtl-undefined", ["info", j("usemtl100k_distinct.obj")], "error|ok", r"usemtl|material|graph:",
-        "usemtl100k_distinct.obj")
+    # undefined materials are documented as the default material
+    add("fanout-obj-100k-usemtl-undefined", ["info", j("usemtl100k_distinct.obj")], "ok", r"graph:")
     with open(j("usemtl100k_empty.obj"), "w") as f:
         f.write("mtllib two.mtl\n" + "usemtl a\nusemtl b\n" * 50000 + TRI_OBJ)
     add("fanout-obj-100k-usemtl-no-faces", ["info", j("usemtl100k_empty.obj")], "ok", r"graph:")
@@ -474,9 +476,13 @@ def build(d, canopy):
                 "finite|overflow|range|float|integer|whole|number|positive|expected", name)
 
     # degenerate cameras and transforms ---------------------------------------------------------------
+    # an up hint parallel to the view is documented as no error (the fallback up is used)
+    for cname, cam in [("up-parallel", {"type": "camera", "eye": [0.2, 0.2, 5], "target": [0.2, 0.2, 0], "up": [0, 0, 1]}),
+                       ("up-parallel-neg", {"type": "camera", "eye": [0.2, 5, 0.2], "target": [0.2, 0, 0.2],
+                                            "up": [0, -3, 0]})]:
+        write(j("cam_%s.json" % cname), json_scene([{"type": "mesh", "mesh": "t"}, cam]))
+        add("camera-%s" % cname, R + [j("cam_%s.json" % cname)], "ok", "")
     cams = [
-        ("up-parallel", {"type": "camera", "eye": [0, 0, 5], "target": [0, 0, 0], "up": [0, 0, 1]}),
-        ("up-parallel-neg", {"type": "camera", "eye": [0, 5, 0], "target": [0, 0, 0], "up": [0, -3, 0]}),
         ("up-zero", {"type": "camera", "up": [0, 0, 0]}),
         ("eye-is-target", {"type": "camera", "eye": [1, 2, 3], "target": [1, 2, 3]}),
         ("eye-near-target", {"type": "camera", "eye": [1, 2, 3], "target": [1, 2, 3.0000000001]}),
@@ -488,7 +494,7 @@ def build(d, canopy):
         name = "cam_%s.json" % cname
         write(j(name), json_scene([{"type": "mesh", "mesh": "t"}, cam]))
         add("camera-%s" % cname, R + [j(name)], "error", "camera|fovy", name)
-    for sname, scale in [("1e-30", 1e-30), ("1e-20", 1e-20), ("0", 0), ("1e30", 1e30)]:
+    for sname, scale in [("1e-30", 1e-30), ("1e-38", 1e-38), ("0", 0), ("1e30", 1e30)]:
         name = "camscale_%s.json" % sname
         write(j(name), json_scene([{"type": "mesh", "mesh": "t"},
                                    {"type": "transform", "scale": scale, "children": [{"type": "camera"}]}]))
@@ -509,7 +515,7 @@ def build(d, canopy):
         write(j(name), json_scene([{"type": "instance", "target": "q%d" % depth}], prototypes=protos))
         add("instance-nested-scale-%dx%g" % (depth, s), R + [j(name)], "error",
             "finite|invert|float|singular|range|overflow", name)
-    for sname, sc in [("0", 0), ("[1,0,1]", [1, 0, 1]), ("1e-30", 1e-30)]:
+    for sname, sc in [("0", 0), ("[1,0,1]", [1, 0, 1]), ("1e-39", 1e-39), ("[1e-30,1e30,1]", [1e-30, 1e30, 1e-50])]:
         name = "instsing_%d.json" % len(sname)
         write(j(name), json_scene([{"type": "instance", "target": "p", "scale": sc}],
                                   prototypes=[{"name": "p", "type": "mesh", "mesh": "t"}]))
@@ -599,8 +605,10 @@ def build(d, canopy):
                       ("keyword", big + " 1 2 3\n" + TRI_OBJ), ("line-no-newline", TRI_OBJ + "v " + big)]:
         name = "bigtoken_%s.obj" % tag
         write(j(name), text)
-        expect = "error"
-        add("token-10MB-obj-%s" % tag, ["info", j(name)], expect, ".", name)
+        if tag in ("usemtl", "keyword"):   # an undefined material, an unknown statement: documented as accepted
+            add("token-10MB-obj-%s" % tag, ["info", j(name)], "ok", "graph:")
+        else:
+            add("token-10MB-obj-%s" % tag, ["info", j(name)], "error", ".", name)
     add("token-10MB-obj-trace", ["trace", "--scene", j("bigtoken_v-coord.obj"), "--rays", j("one.rays"), "--query",
                                  "closest", "--out", j("out", "h.hits")], "error", ".", "bigtoken_v-coord.obj")
     write(j("bigtoken.inst"), "mesh tri.obj\n1 0 0 0 0 1 0 0 0 0 1 %s\n" % big)
@@ -648,6 +656,11 @@ def build(d, canopy):
         add("gltf-schema-%s" % name, ["info", j(name + ".gltf")], "error", pattern, name + ".gltf")
 
     def with_tex(d, index):
+        uv = struct.pack("<6f", 0, 0, 1, 0, 0, 1)
+        d["buffers"].append({"byteLength": 24, "uri": "data:application/octet-stream;base64," + base64.b64encode(uv).decode()})
+        d["bufferViews"].append({"buffer": 1, "byteLength": 24})
+        d["accessors"].append({"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"})
+        d["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = 1
         d["images"] = [{"uri": "ok.png"}]
         d["textures"] = [{"source": 0}]
         d["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": index}}}]
@@ -679,7 +692,7 @@ def build(d, canopy):
     gmut("scene-node-big", lambda d: d["scenes"][0].update(nodes=[42]), "node|range|index")
     gmut("scene-index-big", lambda d: d.update(scene=9), "scene|range|index")
     gmut("node-children-big", lambda d: d["nodes"][0].update(children=[99]), "node|range|index|children")
-    gmut("indices-out-of-range", lambda d: (d["accessors"].append({"bufferView": 0, "componentType": 5125, "count": 3,
+    gmut("indices-out-of-range", lambda d: (d["accessors"].append({"bufferView": 0, "componentType": 5125, "count": 6,
                                                                    "type": "SCALAR"}),
                                             d["meshes"][0]["primitives"][0].update(indices=1)), "index|range|vertex|indices")
     gmut("asset-missing", lambda d: d.pop("asset"), "asset")

@@ -757,6 +757,13 @@ struct file_checker {
             ++facets;
             check_counts("", 3 * std::uint64_t(facets), facets);
         }
+        // The last line that is not blank opens with "endsolid": an ASCII STL cut after its last
+        // complete facet is truncated, not a smaller mesh.
+        std::size_t const last = data.find_last_not_of(" \t\r\n");
+        std::size_t const start = data.find_last_of('\n', last) == std::string_view::npos ? 0 : data.find_last_of('\n', last) + 1;
+        std::string_view const tail = data.substr(start, last + 1 - start);
+        if (tail.substr(tail.find_first_not_of(" \t"), 8) != "endsolid")
+            fail(std::to_string(line), "ASCII STL ends before its 'endsolid' line (truncated?)");
         return facets;
     }
 
