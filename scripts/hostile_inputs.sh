@@ -7,6 +7,7 @@
 # Prints one line per case and a summary table; exits 1 if any case is not ok.
 #   scripts/hostile_inputs.sh [--quick] [--canopy PATH] [--jobs N] [--limit-kib N] [--timeout S]
 #                             [--keep] [-v] [FILTER...]
-# --quick skips the slow cases (under a minute on 2 cores; ctest runs it with label `hostile`);
+# --quick runs the first case of each group, no slow one (under a minute on 2 cores; ctest runs
+# it, label `hostile`);
 # FILTER words run only the cases whose name contains one of them. Details: hostile_inputs.py.
 exec python3 "$(dirname "$0")/hostile_inputs.py" "$@"

@@ -943,6 +943,28 @@ TEST_CASE("ASCII OFF: values beyond a float and counts beyond OpenMesh's are ref
     CHECK(uv.mesh.uvs[0][2].y == 1.0f);
 }
 
+TEST_CASE("an ASCII STL cut after a complete facet, before its 'endsolid' line, is a truncated file") {
+    temp_folder const tmp("canopy_openmesh_test");
+    std::string const facet =
+        "facet normal 0 0 1\n outer loop\n  vertex 0 0 0\n  vertex 1 0 0\n  vertex 0 1 0\n endloop\nendfacet\n";
+    std::string const whole = "solid t\n" + facet + facet + "endsolid t\n";
+    tmp.write("whole.stl", whole);
+    canopy::scene s;
+    CHECK(load_mesh(tmp.path / "whole.stl", s).triangles.size() == 2);
+    tmp.write("spaces.stl", "solid t\n" + facet + "  endsolid\r\n\n  \n");
+    canopy::scene s2;
+    CHECK(load_mesh(tmp.path / "spaces.stl", s2).triangles.size() == 1);
+    // Cut after the second facet, inside 'endsolid', after 'endloop': each names the last line read.
+    for (auto const& [text, line] : std::vector<std::pair<std::string, int>>{
+             {"solid t\n" + facet + facet, 15}, {"solid t\n" + facet + "endsol", 9},
+             {"solid t\n" + facet + facet.substr(0, facet.find("endfacet")), 14}}) {
+        INFO(text);
+        tmp.write("cut.stl", text);
+        require_error(tmp.path / "cut.stl",
+                      "cut.stl:" + std::to_string(line) + ": ASCII STL ends before its 'endsolid' line (truncated?)");
+    }
+}
+
 TEST_CASE("STL, OBJ and OM: values beyond a float, the lines OpenMesh reads, counts against the limit and the file") {
     temp_folder const tmp("canopy_openmesh_test");
     tmp.write("huge.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 1e39\nvertex 0 1 0\n"
