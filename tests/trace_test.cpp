@@ -420,7 +420,7 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
         // canopy::resource_limits, which the help once misstated (2^24 placements for 2^22).
         canopy::resource_limits const defaults{};
         CHECK(defaults.max_placements == 4194304);
-        for (std::string const text :
+        for (std::string const& text :
              {"--max-file-bytes N  bytes of one input file (default " + std::to_string(defaults.max_file_bytes),
               std::string("--max-texels N"), "(default " + std::to_string(defaults.max_texels),
               std::string("--max-triangles N"), "(default " + std::to_string(defaults.max_triangles),
