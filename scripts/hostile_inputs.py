@@ -632,7 +632,8 @@ def build(d, canopy):
     write(j("bigtoken.ply"), PLY_ASCII.replace("property float z", "property float " + big))
     add("token-10MB-ply-property", ["info", j("bigtoken.ply")], "error", ".", "bigtoken.ply")
     add("token-10MB-cli-scene", ["info", big[:100000] + ".obj"], "error", ".", None)
-    add("token-10MB-cli-size", R + ["--size", digits[:100000]], "error", "--size", "--size", codes=(2,))
+    add("token-10MB-cli-size", ["render", "-o", out, j("tri.obj"), "--size", digits[:100000]], "error", "--size",
+        "--size", codes=(2,))
 
     # non-convex faces of more than 256 corners (fanned and reported) --------------------------------------
     for n in [257, 300, 1000]:
@@ -777,6 +778,35 @@ def build(d, canopy):
         "resolution")
     add("cli-gen-soup-huge", ["info", "gen:triangle_soup:count=1000000000000"], "error", "count|limit|max|triangles",
         "count")
+
+    # generator parameters: non-finite, negative, huge, unknown
+    for spec, param in [("sphere:radius=nan", "radius"), ("sphere:radius=1e39", "radius"), ("sphere:radius=0", "radius"),
+                        ("sphere:radius=-1", "radius"), ("sphere:subdivisions=-1", "subdivisions"),
+                        ("sphere:bogus=1", "bogus"), ("terrain:size=nan", "size"), ("terrain:resolution=0", "resolution"),
+                        ("terrain:resolution=70000", "resolution"), ("terrain:amplitude=inf", "amplitude"),
+                        ("terrain:octaves=1000000", "octaves"), ("terrain:seed=-1", "seed"),
+                        ("triangle_soup:count=0", "count"), ("triangle_soup:count=-5", "count"),
+                        ("triangle_soup:size=nan", "size"), ("triangle_soup:extent=1e39", "extent"),
+                        ("billboard_forest:billboards=1000000000000", "billboards"),
+                        ("billboard_forest:spheres=-1", "spheres"),
+                        ("billboard_forest:texture_size=100000", "texture_size")]:
+        add("gen-param-%s" % spec.replace(":", "-").replace("=", "-"), ["info", "gen:" + spec], "error", param, param,
+            codes=(1, 2))
+    add("gen-param-render-radius-nan", R + ["gen:sphere:radius=nan"], "error", "radius", "radius", codes=(1, 2))
+
+    # images of other formats claiming huge sizes (checked before decoding)
+    for name, data in [("huge.ppm", b"P6\n100000 100000\n255\n" + b"\0" * 1000),
+                       ("huge.pgm", b"P5\n2000000000 3\n255\n" + b"\0" * 1000),
+                       ("huge.tga", struct.pack("<BBBHHBHHHHBB", 0, 0, 2, 0, 0, 0, 0, 0, 65535, 65535, 32, 8) + b"\0" * 1000),
+                       ("huge.hdr", b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 100000 +X 100000\n" + b"\0" * 1000),
+                       ("huge.bmp", b"BM" + struct.pack("<IHHI", 1000, 0, 0, 54) + struct.pack("<IiiHHIIiiII", 40, 100000,
+                                                                                                 100000, 1, 24, 0, 0, 0, 0, 0, 0)
+                        + b"\0" * 1000),
+                       ("huge.gif", b"GIF89a" + struct.pack("<HHBBB", 65535, 65535, 0, 0, 0) + b"\0" * 100)]:
+        write(j(name), data)
+        write(j(name + ".mtl"), "newmtl m\nmap_Kd %s\n" % name)
+        write(j(name + ".obj"), "mtllib %s.mtl\nusemtl m\n" % name + TRI_OBJ)
+        add("image-huge-%s" % name, ["info", j(name + ".obj")], "error", "texels|image", name)
 
     # outputs -------------------------------------------------------------------------------------------------------
     add("out-dev-full-trace", ["trace", "--scene", j("tri.obj"), "--rays", j("one.rays"), "--query", "closest", "--out",
