@@ -808,6 +808,64 @@ def build(d, canopy):
         write(j(name + ".obj"), "mtllib %s.mtl\nusemtl m\n" % name + TRI_OBJ)
         add("image-huge-%s" % name, ["info", j(name + ".obj")], "error", "texels|image", name)
 
+    # files referring to themselves or to each other
+    write(j("selfmesh.json"), json_scene([{"type": "mesh", "mesh": "m"}], meshes=[{"name": "m", "file": "selfmesh.json"}]))
+    add("json-mesh-file-itself", ["info", j("selfmesh.json")], "error", "itself|cycle|already|refer|loading",
+        "selfmesh.json")
+    write(j("ping.json"), json_scene([{"type": "mesh", "mesh": "m"}], meshes=[{"name": "m", "file": "pong.json"}]))
+    write(j("pong.json"), json_scene([{"type": "mesh", "mesh": "m"}], meshes=[{"name": "m", "file": "ping.json"}]))
+    add("json-mesh-file-cycle", ["info", j("ping.json")], "error", "itself|cycle|already|refer|loading", "ping.json")
+    write(j("selfmtl.obj"), "mtllib selfmtl.obj\n" + TRI_OBJ)
+    add("obj-mtllib-itself", ["info", j("selfmtl.obj")], "ok", "graph:")   # an MTL reader ignores OBJ statements
+    write(j("gltfself.gltf"), json.dumps(dict(gltf_doc(), buffers=[{"byteLength": 36, "uri": "gltfself.gltf"}])))
+    add("gltf-buffer-is-itself", ["info", j("gltfself.gltf")], "error", "byteLength", "gltfself.gltf")
+    # OBJ indices and corners
+    for tag, text, pattern in [("index-0", "f 1 2 0\n", "range|0"), ("index-neg-huge", "f 1 2 -99999999999\n", "range"),
+                               ("index-huge", "f 1 2 99999999999999999999\n", "range|integer|index"),
+                               ("vt-range", "f 1/9 2/9 3/9\n", "range"), ("vn-range", "f 1//9 2//9 3//9\n", "range")]:
+        write(j("objidx_%s.obj" % tag), "v 0 0 0\nv 1 0 0\nv 0 1 0\n" + text)
+        add("obj-%s" % tag, ["info", j("objidx_%s.obj" % tag)], "error", pattern, "objidx_%s.obj" % tag)
+    write(j("objmillion.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf " + " ".join(["1 2 3"] * 333333) + "\n")
+    add("obj-face-of-a-million-corners", ["info", j("objmillion.obj")], "ok", "fanned")   # winds round 333333 times
+    for n in [5, 7, 301]:   # stars {n/2}: every turn the same way, self-intersecting: fanned and reported
+        pts = [(__import__("math").cos(2 * 3.141592653589793 * 2 * k / n),
+                __import__("math").sin(2 * 3.141592653589793 * 2 * k / n), 0) for k in range(n)]
+        write(j("star%d.obj" % n), "".join("v %.9f %.9f %.9f\n" % q for q in pts) + "f " +
+              " ".join(str(k + 1) for k in range(n)) + "\n")
+        add("nonconvex-star-%d" % n, ["info", j("star%d.obj" % n)], "ok", "fanned")
+    # MTL oddities
+    for tag, mtl, pattern in [("map-missing", "newmtl m\nmap_Kd nothere.png\n", "not found"),
+                              ("map-d-missing", "newmtl m\nmap_d nothere.png\n", "not found"),
+                              ("map-option-nan", "newmtl m\nmap_Kd -s nan nan nan ok.png\n", "finite|nan|option"),
+                              ("map-folder", "newmtl m\nmap_Kd folder.d\n", "folder"),
+]:
+        write(j("mtl_%s.mtl" % tag), mtl)
+        write(j("mtl_%s.obj" % tag), "mtllib mtl_%s.mtl\nusemtl m\nvt 0 0\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/1 3/1\n" % tag)
+        add("mtl-%s" % tag, ["info", j("mtl_%s.obj" % tag)], "error", pattern, "mtl_%s" % tag)
+    write(j("mtl_twice.mtl"), "newmtl m\nKd 1 0 0\nnewmtl m\nKd 0 1 0\n")   # documented: the first definition wins
+    write(j("mtl_twice.obj"), "mtllib mtl_twice.mtl\nusemtl m\n" + TRI_OBJ)
+    add("mtl-newmtl-twice", ["info", j("mtl_twice.obj")], "ok", "graph:")
+    # glTF cameras
+    for tag, cam in [("yfov-0", {"type": "perspective", "perspective": {"yfov": 0, "znear": 0.1}}),
+                     ("yfov-4", {"type": "perspective", "perspective": {"yfov": 4, "znear": 0.1}}),
+                     ("aspect-neg", {"type": "perspective", "perspective": {"yfov": 1, "znear": 0.1, "aspectRatio": -1}}),
+                     ("znear-0", {"type": "perspective", "perspective": {"yfov": 1, "znear": 0}}),
+                     ("no-perspective", {"type": "perspective"}),
+                     ("type-bogus", {"type": "fisheye"})]:
+        doc = gltf_doc()
+        doc["cameras"] = [cam]
+        doc["nodes"].append({"camera": 0, "translation": [0.2, 0.2, 3]})
+        doc["scenes"][0]["nodes"].append(1)
+        write(j("gcam_%s.gltf" % tag), json.dumps(doc))
+        add("gltf-camera-%s" % tag, R + [j("gcam_%s.gltf" % tag)], "error", "camera|yfov|znear|aspect|perspective|type",
+            "gcam_%s.gltf" % tag)
+    doc = gltf_doc()
+    doc["cameras"] = [{"type": "perspective", "perspective": {"yfov": 1, "znear": 0.1}}]
+    doc["nodes"].append({"camera": 0, "scale": [0, 0, 0]})
+    doc["scenes"][0]["nodes"].append(1)
+    write(j("gcam_scale0.gltf"), json.dumps(doc))
+    add("gltf-camera-scale-0", R + [j("gcam_scale0.gltf")], "error", "camera|invert|singular", "gcam_scale0.gltf")
+
     # outputs -------------------------------------------------------------------------------------------------------
     add("out-dev-full-trace", ["trace", "--scene", j("tri.obj"), "--rays", j("one.rays"), "--query", "closest", "--out",
                                "/dev/full"], "error", "space|full|write", "/dev/full")
