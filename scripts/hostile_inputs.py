@@ -341,6 +341,11 @@ def build(d, canopy):
         write(j("stlbin%d.stl" % cnt), stl_binary(cnt, 1))
         add("stl-binary-count-%d" % cnt, ["info", j("stlbin%d.stl" % cnt)], "error",
             "limit|truncat|expect|bytes|short|triangles|count|size", "stlbin%d.stl" % cnt)
+    for tag, body in [("vertex", "0 0 0 9\n1 0 0\n0 1 0\n3 0 1 2\n"), ("face", "0 0 0\n1 0 0\n0 1 0\n3 0 1 2 2\n"),
+                      ("joined", "0 0 0 1 0 0\n0 1 0\n3 0 1 2\n")]:
+        write(j("plyextra_%s.ply" % tag), PLY_ASCII[:PLY_ASCII.index("end_header\n") + 11] + body)
+        add("ply-extra-values-%s" % tag, ["info", j("plyextra_%s.ply" % tag)], "error", "more values on its line",
+            "plyextra_%s.ply" % tag)
     write(j("plyneg.ply"), PLY_ASCII.replace("vertex 3", "vertex -3"))
     add("ply-negative-count", ["info", j("plyneg.ply")], "error", "count|vertex|negative|header|number", "plyneg.ply")
     write(j("offneg.off"), "OFF\n-3 1 0\n0 0 0\n")
