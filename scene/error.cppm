@@ -4,8 +4,10 @@
 // names the file, the place in it (line, element or node, where known) and the problem, as
 //   "forest.json: node 'trees': instance target 'oak' does not exist"
 //   "bunny.obj:1207: face index 40112 is out of range (35947 vertices)"
-// so a user can find the fault without a debugger. Nothing is half-loaded: a loader that throws
-// leaves the scene it was loading into as it was (see scene::transaction).
+// so a user can find the fault without a debugger. A file name over 160 bytes is shown shortened
+// (its first 60 and last 99 bytes), so no message line grows with a hostile name. Nothing is
+// half-loaded: a loader that throws leaves the scene it was loading into as it was (see
+// scene::transaction).
 module;
 #include <cstddef>
 #include <stdexcept>
@@ -29,7 +31,7 @@ public:
 
 private:
     static std::string compose(std::string const& file, std::string const& where, std::string const& problem) {
-        std::string m = file.empty() ? std::string("scene") : file;
+        std::string m = file.empty() ? std::string("scene") : shown_file(file);
         if (!where.empty()) {
             bool const line = where.find_first_not_of("0123456789") == std::string::npos;
             m += line ? ":" + where : ": " + where;
@@ -37,6 +39,17 @@ private:
         return m + ": " + problem;
     }
 
+    // A file name of more than 160 bytes (a path built from a hostile name) is shown by its first 60
+    // and last 99 bytes around "…", cut at UTF-8 character boundaries; file() keeps it whole.
+    static std::string shown_file(std::string const& file) {
+        constexpr std::size_t longest = 160, head = 60, tail = 99;
+        if (file.size() <= longest) return file;
+        auto continuation = [&](std::size_t i) { return (static_cast<unsigned char>(file[i]) & 0xC0) == 0x80; };
+        std::size_t h = head, t = file.size() - tail;
+        while (h > 0 && continuation(h)) --h;
+        while (t < file.size() && continuation(t)) ++t;
+        return file.substr(0, h) + "…" + file.substr(t);
+    }
     std::string file_, where_, problem_;
 };
 

@@ -3,12 +3,13 @@
 //
 // The face is looked at in the plane of its Newell normal (Newell 1972; projected by dropping the
 // normal's largest component, so the 2-D coordinates are the 3-D ones, exactly). Then:
-// - a convex face (no turn against the face's orientation) becomes the fan (c0, ck, ck+1),
-//   k = 1 … n−2, which is what loaders have always produced for convex faces;
+// - a convex face (no turn against the face's orientation, winding round once) becomes the fan
+//   (c0, ck, ck+1), k = 1 … n−2, which is what loaders have always produced for convex faces;
 // - a simple non-convex face is ear-clipped (Meisters 1975, "Polygons have ears"; O(n²)): every
 //   triangle lies inside the face, and together they cover it exactly;
-// - a face that is neither (self-intersecting, all corners collinear, no ear left) is fanned from
-//   the corners not yet cut off, and reported as such; so is a non-convex face of more than
+// - a face that is neither (self-intersecting, winding round more than once, all corners
+//   collinear, no ear left) is fanned from the corners not yet cut off, and reported as such;
+//   so is a non-convex face of more than
 //   max_ear_clipped_corners corners, and one whose clipping takes more than 8 n² corner-in-ear
 //   tests (ear clipping is quadratic in the corners for ordinary faces, cubic at worst, and no
 //   face may make a loader hang).
@@ -130,6 +131,25 @@ inline polygon_triangles triangulate_polygon(std::span<vec3<float> const> corner
     bool convex = true;
     for (std::size_t k = 0; k < n && convex; ++k)
         convex = sign * detail::turn(p[(k + n - 1) % n], p[k], p[(k + 1) % n]) >= 0.0;
+    // Every turn the same way is not enough: a face that winds round more than once (a
+    // pentagram, a triangle's corners listed twice) turns one way at each corner too. Winding
+    // once, the edge directions sweep one full turn, so the signs of their x and of their y
+    // components change at most twice each round the face (exact: the sign of a difference of
+    // doubles is exact; edges of no length in a coordinate are skipped).
+    auto const sign_changes = [&](auto coordinate) {
+        int changes = 0, last = 0, first = 0;
+        for (std::size_t k = 0; k < n; ++k) {
+            double const d = coordinate(p[(k + 1) % n]) - coordinate(p[k]);
+            int const s = d > 0.0 ? 1 : d < 0.0 ? -1 : 0;
+            if (s == 0) continue;
+            if (first == 0) first = s;
+            if (last != 0 && s != last) ++changes;
+            last = s;
+        }
+        return changes + (last != 0 && last != first ? 1 : 0);
+    };
+    if (convex && (sign_changes([](point2 q) { return q.x; }) > 2 || sign_changes([](point2 q) { return q.y; }) > 2))
+        convex = false;
     if (convex) {
         detail::fan(order, out);
         return out;
@@ -140,6 +160,21 @@ inline polygon_triangles triangulate_polygon(std::span<vec3<float> const> corner
         detail::fan(order, out);
         return out;
     }
+
+    // Two edges that cross (each one's ends strictly on both sides of the other: exact turns)
+    // make the face self-intersecting; ear clipping would cut it without noticing.
+    for (std::size_t a = 0; a < n; ++a)
+        for (std::size_t c = a + 2; c < n; ++c) {
+            if (a == 0 && c == n - 1) continue; // adjacent round the end
+            point2 const p0 = p[a], p1 = p[(a + 1) % n], q0 = p[c], q1 = p[(c + 1) % n];
+            double const t0 = detail::turn(p0, p1, q0), t1 = detail::turn(p0, p1, q1);
+            double const t2 = detail::turn(q0, q1, p0), t3 = detail::turn(q0, q1, p1);
+            if (((t0 > 0.0 && t1 < 0.0) || (t0 < 0.0 && t1 > 0.0)) && ((t2 > 0.0 && t3 < 0.0) || (t2 < 0.0 && t3 > 0.0))) {
+                out.fanned_fallback = true;
+                detail::fan(order, out);
+                return out;
+            }
+        }
 
     // Ear clipping: walk round the face and cut off a corner whose triangle turns the face's way
     // and holds no other remaining corner, until three are left. A full round without a cut

@@ -7,6 +7,7 @@
 #include <catch2/catch.hpp>
 
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -218,6 +219,22 @@ TEST_CASE("json: instances target prototypes by name, ids default to the count o
     CHECK(compiled.statistics.levels == 2);
     CHECK(compiled.statistics.group_instances == 2);
     CHECK(compiled.statistics.meshes_built == 1);
+}
+
+TEST_CASE("json: an array of 10^5 nodes loads in linear time (nesting is checked on the text)") {
+    temp_folder const tmp("canopy_json_test");
+    std::string text = R"({"meshes": [{"name": "t", "positions": [0,0,0, 1,0,0, 0,1,0], "indices": [0,1,2]}], "nodes": [)";
+    for (int i = 0; i < 100000; ++i) text += std::string(i ? "," : "") + R"({"type": "mesh", "mesh": "t"})";
+    text += "]}";
+    auto const file = tmp.write("wide.json", text);
+    canopy::registry r;
+    canopy::register_json_plugin(r);
+    canopy::scene s;
+    auto const start = std::chrono::steady_clock::now();
+    auto const group = r.load(s, file, s.root());
+    double const seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    CHECK(s.at(group).children.size() == 100000);
+    CHECK(seconds < 5.0); // quadratic parsing took ~25 s here
 }
 
 TEST_CASE("json: instance cycles reach the graph and compile reports them") {

@@ -943,6 +943,42 @@ TEST_CASE("ASCII OFF: values beyond a float and counts beyond OpenMesh's are ref
     CHECK(uv.mesh.uvs[0][2].y == 1.0f);
 }
 
+TEST_CASE("an ASCII STL cut after a complete facet, before its 'endsolid' line, is a truncated file") {
+    temp_folder const tmp("canopy_openmesh_test");
+    std::string const facet =
+        "facet normal 0 0 1\n outer loop\n  vertex 0 0 0\n  vertex 1 0 0\n  vertex 0 1 0\n endloop\nendfacet\n";
+    std::string const whole = "solid t\n" + facet + facet + "endsolid t\n";
+    tmp.write("whole.stl", whole);
+    canopy::scene s;
+    CHECK(load_mesh(tmp.path / "whole.stl", s).triangles.size() == 2);
+    tmp.write("spaces.stl", "solid t\n" + facet + "  endsolid\r\n\n  \n");
+    canopy::scene s2;
+    CHECK(load_mesh(tmp.path / "spaces.stl", s2).triangles.size() == 1);
+    // Cut after the second facet, inside 'endsolid', after 'endloop': each names the last line read.
+    for (auto const& [text, line] : std::vector<std::pair<std::string, int>>{
+             {"solid t\n" + facet + facet, 15}, {"solid t\n" + facet + "endsol", 9},
+             {"solid t\n" + facet + facet.substr(0, facet.find("endfacet")), 14}}) {
+        INFO(text);
+        tmp.write("cut.stl", text);
+        require_error(tmp.path / "cut.stl",
+                      "cut.stl:" + std::to_string(line) + ": ASCII STL ends before its 'endsolid' line (truncated?)");
+    }
+}
+
+TEST_CASE("ASCII PLY: a value left over on an entry's line is named, not read as the next entry's") {
+    temp_folder const tmp("canopy_openmesh_test");
+    std::string const header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                               "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    tmp.write("extra_vertex.ply", header + "0 0 0 9\n1 0 0\n0 1 0\n3 0 1 2\n");
+    require_error(tmp.path / "extra_vertex.ply", "extra_vertex.ply:10: vertex 0: more values on its line than its properties take (next: '9')");
+    tmp.write("extra_face.ply", header + "0 0 0\n1 0 0\n0 1 0\n3 0 1 2 7 \r\n");
+    require_error(tmp.path / "extra_face.ply", "extra_face.ply:13: face 0: more values on its line than its properties take (next: '7')");
+    // Trailing blanks and CRLF line ends are fine.
+    tmp.write("crlf.ply", header + "0 0 0 \r\n1 0 0\t\r\n0 1 0\r\n3 0 1 2\r\n");
+    canopy::scene s;
+    CHECK(load_mesh(tmp.path / "crlf.ply", s).triangles.size() == 1);
+}
+
 TEST_CASE("STL, OBJ and OM: values beyond a float, the lines OpenMesh reads, counts against the limit and the file") {
     temp_folder const tmp("canopy_openmesh_test");
     tmp.write("huge.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 1e39\nvertex 0 1 0\n"

@@ -203,6 +203,33 @@ TEST_CASE("polygon: faces that cannot be cut are fanned and reported, and large 
     }
     auto const s = canopy::triangulate_polygon(pentagram);
     CHECK(s.triangles.size() == 3);
+    CHECK(s.fanned_fallback); // every turn is the same way, but it winds round twice: not convex
+
+    // Faces that wind round more than once, turning the same way at every corner: a square's
+    // corners listed twice, a triangle's listed 100 times (over max_ear_clipped_corners).
+    std::vector<vec3<float>> square_twice;
+    for (int round = 0; round < 2; ++round)
+        for (vec3<float> c : {vec3<float>{0, 0, 0}, vec3<float>{1, 0, 0}, vec3<float>{1, 1, 0}, vec3<float>{0, 1, 0}})
+            square_twice.push_back(c);
+    auto const sq = canopy::triangulate_polygon(square_twice);
+    CHECK(sq.triangles.size() == 6);
+    CHECK((sq.ear_clipped || sq.fanned_fallback));
+    std::vector<vec3<float>> triangle_100;
+    for (int round = 0; round < 100; ++round)
+        for (vec3<float> c : {vec3<float>{0, 0, 0}, vec3<float>{1, 0, 0}, vec3<float>{0, 1, 0}}) triangle_100.push_back(c);
+    auto const t100 = canopy::triangulate_polygon(triangle_100);
+    CHECK(t100.triangles.size() == 298);
+    CHECK(t100.fanned_fallback);
+    // A convex face of 1000 corners winds round once: still its plain fan.
+    std::vector<vec3<float>> round_face;
+    for (int k = 0; k < 1000; ++k) {
+        double const angle = 2.0 * 3.141592653589793 * k / 1000.0;
+        round_face.push_back({float(std::cos(angle)), float(std::sin(angle)), 0.0f});
+    }
+    auto const r = canopy::triangulate_polygon(round_face);
+    CHECK(r.triangles.size() == 998);
+    CHECK_FALSE(r.ear_clipped);
+    CHECK_FALSE(r.fanned_fallback);
 
     // Non-convex and larger than max_ear_clipped_corners: fanned at once.
     std::vector<vec3<float>> zigzag;

@@ -578,6 +578,24 @@ TEST_CASE("the registry checks the file before its extension: folders, devices a
     canopy::default_limits() = saved;
 }
 
+TEST_CASE("scene_error shows a file name of more than 160 bytes by its ends, and keeps it whole in file()") {
+    std::string const short_name = std::string(160, 'a');
+    CHECK(std::string(canopy::scene_error(short_name, "3", "bad").what()) == short_name + ":3: bad");
+    // 200 bytes: the first 60 and the last 99 around "…"; a 3-byte character is never split.
+    std::string const long_name = "/tmp/" + std::string(55, 'b') + "\xE2\x82\xAC" + std::string(134, 'c') + ".obj";
+    REQUIRE(long_name.size() == 201);
+    canopy::scene_error const e(long_name, "", "file not found");
+    CHECK(e.file() == long_name);
+    CHECK(std::string(e.what()) == "/tmp/" + std::string(55, 'b') + "…" + std::string(95, 'c') + ".obj: file not found");
+    std::string const split = std::string(59, 'd') + "\xE2\x82\xAC" + std::string(200, 'e');
+    CHECK(std::string(canopy::scene_error(split, "", "x").what()) == std::string(59, 'd') + "…" + std::string(99, 'e') + ": x");
+    // A nested error (a loader quoting another file's message) stays short too.
+    std::string const huge(10 << 20, 'f');
+    canopy::scene_error const inner(huge + ".bin", "", "file not found (buffer)");
+    canopy::scene_error const outer("scene.gltf", "buffers[0]", inner.what());
+    CHECK(std::string(outer.what()).size() < 300);
+}
+
 TEST_CASE("read_regular_file reads a file whole or names why not, require_text refuses binary data by offset") {
     test_support::temp_folder const tmp("canopy_scene_test");
     std::string bytes(70000, 'a');

@@ -599,6 +599,28 @@ TEST_CASE("a texture that is a device, a folder or not what its extension says i
                Catch::Contains("empty.png: cannot read image"));
 }
 
+TEST_CASE("a PNG cut anywhere after its pixel data, before the end of its IEND chunk, is a truncated file") {
+    temp_folder const tmp("canopy_texture_test");
+    canopy::rgba_image two;
+    two.width = 2;
+    two.height = 1;
+    two.pixels = {1, 0, 0, 1, 0, 1, 0, 1};
+    canopy::write_image(tmp.path / "two.png", two);
+    std::ifstream in(tmp.path / "two.png", std::ios::binary);
+    std::string const whole((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    REQUIRE(whole.ends_with(std::string("IEND\xAE\x42\x60\x82", 8)));
+    CHECK(canopy::read_texture_image(tmp.path / "two.png").texels.size() == 2);
+    // Bytes after IEND are tolerated; a file cut in its last 12 bytes (the IEND chunk) is not.
+    tmp.write("trailing.png", whole + "junk");
+    CHECK(canopy::read_texture_image(tmp.path / "trailing.png").texels.size() == 2);
+    for (std::size_t cut : {1u, 4u, 8u, 12u}) {
+        INFO("cut " << cut);
+        tmp.write("cut.png", whole.substr(0, whole.size() - cut));
+        CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "cut.png"); }),
+                   Catch::Contains("cut.png: PNG file without its IEND chunk at the end (truncated?)"));
+    }
+}
+
 TEST_CASE("texture files decode to RGBA: grey to RGB, missing alpha 1, 8-bit data marked sRGB") {
     temp_folder const tmp("canopy_texture_test");
     tmp.write("grey.pgm", std::string("P5\n2 1\n255\n\x00\xff", 13));

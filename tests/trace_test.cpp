@@ -416,10 +416,17 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
         auto const result = run_canopy({command, "--help"});
         CHECK(result.exit_code == 0);
         CHECK(result.output.find(std::string("usage: canopy ") + command) != std::string::npos);
-        // Every command's help names the limit options with their defaults.
-        for (char const* text : {"--max-file-bytes N  bytes of one input file (default 4294967296", "--max-texels N",
-                                 "(default 67108864", "--max-triangles N", "(default 268435456", "--max-placements N",
-                                 "(default 16777216", "--max-depth N", "(default 4096)"})
+        // Every command's help names the limit options with their defaults: the values of
+        // canopy::resource_limits, which the help once misstated (2^24 placements for 2^22).
+        canopy::resource_limits const defaults{};
+        CHECK(defaults.max_placements == 4194304);
+        for (std::string const& text :
+             {"--max-file-bytes N  bytes of one input file (default " + std::to_string(defaults.max_file_bytes),
+              std::string("--max-texels N"), "(default " + std::to_string(defaults.max_texels),
+              std::string("--max-triangles N"), "(default " + std::to_string(defaults.max_triangles),
+              "--max-placements N  mesh placements after instances are flattened (default " +
+                  std::to_string(defaults.max_placements) + " = 2^22)",
+              std::string("--max-depth N"), "(default " + std::to_string(defaults.max_depth) + ")"})
             CHECK_THAT(result.output, Catch::Contains(text));
     }
 }

@@ -92,7 +92,7 @@ constexpr char const* limits_usage =
     "                      = 2^26, 1 GiB as float RGBA)\n"
     "  --max-triangles N   triangles (and vertices) of the scene's meshes together, each mesh\n"
     "                      counted once (default 268435456 = 2^28)\n"
-    "  --max-placements N  mesh placements after instances are flattened (default 16777216 = 2^24)\n"
+    "  --max-placements N  mesh placements after instances are flattened (default 4194304 = 2^22)\n"
     "  --max-depth N       nesting depth of the scene graph and of a file's structures (default 4096)\n";
 
 constexpr char const* trace_options_usage =

@@ -13,6 +13,7 @@ module;
 #include <new>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 #include <OpenImageIO/filesystem.h>
@@ -75,6 +76,22 @@ std::optional<std::pair<std::uint64_t, std::uint64_t>> size_before_open(std::fil
     return std::nullopt;
 }
 
+// A PNG file (by its signature) must hold its IEND chunk (type and CRC) in its last 64 KiB: image
+// readers stop once the pixels are decoded, so a file cut in its last chunks would load silently.
+bool png_without_end(std::filesystem::path const& path, std::uint64_t size) {
+    static constexpr char signature[] = "\x89PNG\r\n\x1a\n";
+    static constexpr char end[] = "IEND\xAE\x42\x60\x82";
+    std::ifstream in(path, std::ios::binary);
+    char head[8] = {};
+    in.read(head, sizeof head);
+    if (in.gcount() != 8 || std::memcmp(head, signature, 8) != 0) return false;
+    std::uint64_t const tail = std::min<std::uint64_t>(size, 65536);
+    std::string last(std::size_t(tail), '\0');
+    in.seekg(std::streamoff(size - tail));
+    in.read(last.data(), std::streamsize(tail));
+    return std::string_view(last.data(), std::size_t(in.gcount())).find(std::string_view(end, 8)) == std::string_view::npos;
+}
+
 void check_texels(std::filesystem::path const& path, std::uint64_t width, std::uint64_t height,
                   image_read_limits const& limits) {
     std::uint64_t const texels = width * height;
@@ -91,8 +108,9 @@ image_read_limits default_image_read_limits() {
 
 void read_image_into(std::filesystem::path const& path, image_read_limits const& limits,
                      std::function<float*(image_header const&)> const& allocate) {
+    std::uint64_t size = 0;
     try {
-        require_regular_file(path, limits.max_file_bytes);
+        size = require_regular_file(path, limits.max_file_bytes);
     } catch (scene_error const& e) {
         fail(path, e.problem());
     }
@@ -101,7 +119,8 @@ void read_image_into(std::filesystem::path const& path, image_read_limits const&
     std::string extension = path.extension().string();
     if (!extension.empty()) extension.erase(0, 1);
     for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
-    if (auto const size = size_before_open(path, extension)) check_texels(path, size->first, size->second, limits);
+    if (auto const dims = size_before_open(path, extension)) check_texels(path, dims->first, dims->second, limits);
+    if (png_without_end(path, size)) fail(path, "PNG file without its IEND chunk at the end (truncated?)");
     auto in = extension.empty() ? nullptr : OIIO::ImageInput::create(extension, false);
     if (!in) fail(path, "no image reader for this file type (" + (extension.empty() ? std::string("no extension") : "'." + extension + "'") + ")");
     OIIO::ImageSpec spec;

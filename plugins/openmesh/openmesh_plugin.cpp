@@ -413,6 +413,8 @@ struct file_checker {
         bool big_endian;
         std::size_t offset = 0;
 
+        void end_entry(std::string const&) {}
+
         std::optional<double> value(std::string_view type) {
             int const size = ply_size(type);
             if (std::size_t(size) > body.size() - offset) return std::nullopt;
@@ -484,6 +486,18 @@ struct file_checker {
         }
         std::string where() const { return std::to_string(first_line + line); }
         std::string describe(double) const { return shown(last); }
+        // One entry a line (the PLY format): a value left on an entry's line is an error, not the
+        // next entry's first value (which would shift every value after it).
+        void end_entry(std::string const& entry) {
+            std::size_t k = offset;
+            while (k < body.size() && (body[k] == ' ' || body[k] == '\t' || body[k] == '\r')) ++k;
+            if (k < body.size() && body[k] != '\n') {
+                std::size_t end = k;
+                while (end < body.size() && body[end] != '\n' && body[end] != ' ' && body[end] != '\t' && body[end] != '\r') ++end;
+                checker.fail(where(), entry + ": more values on its line than its properties take (next: " +
+                                          shown(body.substr(k, end - k)) + ")");
+            }
+        }
     };
 
     template <typename Source>
@@ -523,6 +537,7 @@ struct file_checker {
                                                      " is out of range (" + std::to_string(vertices) + " vertices)");
                     }
                 }
+                source.end_entry(entry);
             }
         }
     }
@@ -757,6 +772,13 @@ struct file_checker {
             ++facets;
             check_counts("", 3 * std::uint64_t(facets), facets);
         }
+        // The last line that is not blank opens with "endsolid": an ASCII STL cut after its last
+        // complete facet is truncated, not a smaller mesh.
+        std::size_t const last = data.find_last_not_of(" \t\r\n");
+        std::size_t const start = data.find_last_of('\n', last) == std::string_view::npos ? 0 : data.find_last_of('\n', last) + 1;
+        std::string_view const tail = data.substr(start, last + 1 - start);
+        if (tail.substr(tail.find_first_not_of(" \t"), 8) != "endsolid")
+            fail(std::to_string(line), "ASCII STL ends before its 'endsolid' line (truncated?)");
         return facets;
     }
 
