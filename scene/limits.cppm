@@ -151,6 +151,29 @@ inline void require_text(std::string_view text, std::string const& file, std::st
     }
 }
 
+// The byte offset in JSON `text` where arrays and objects first nest deeper than `limit`, or
+// std::string_view::npos: one linear pass over the text (strings skipped), before any parser
+// (whose recursion, or whose callbacks, it bounds).
+inline std::size_t json_nesting_over(std::string_view text, std::uint64_t limit) {
+    std::uint64_t depth = 0;
+    bool in_string = false, escaped = false;
+    for (std::size_t i = 0; i < text.size(); ++i) {
+        char const c = text[i];
+        if (in_string) {
+            if (escaped) escaped = false;
+            else if (c == '\\') escaped = true;
+            else if (c == '"') in_string = false;
+        } else if (c == '"') {
+            in_string = true;
+        } else if (c == '[' || c == '{') {
+            if (++depth > limit) return i;
+        } else if ((c == ']' || c == '}') && depth > 0) {
+            --depth;
+        }
+    }
+    return std::string_view::npos;
+}
+
 // Throws scene_error(file, where, ...) when `count` of `what` exceeds `limit`; the message names
 // the CLI option that raises it.
 inline void check_limit(std::string const& file, std::string const& where, std::uint64_t count, std::uint64_t limit,

@@ -634,26 +634,10 @@ private:
 document_uris check_document(std::string_view text, std::string const& file, std::uint64_t max_depth) {
     // Nesting first, on the text: no parser or copy below recurses deeper than this.
     std::uint64_t const limit = std::min(max_depth, nesting_ceiling);
-    std::uint64_t depth = 0;
-    bool in_string = false, escaped = false;
-    for (std::size_t i = 0; i < text.size(); ++i) {
-        char const c = text[i];
-        if (in_string) {
-            if (escaped) escaped = false;
-            else if (c == '\\') escaped = true;
-            else if (c == '"') in_string = false;
-        } else if (c == '"') {
-            in_string = true;
-        } else if (c == '[' || c == '{') {
-            if (++depth > limit)
-                throw scene_error(file, "", "JSON arrays and objects nest deeper than " + std::to_string(limit) +
-                                                " levels (at byte " + std::to_string(i) + "), over the limit of " +
-                                                (limit == max_depth ? std::string("--max-depth")
-                                                                    : std::string("the glTF loader")));
-        } else if ((c == ']' || c == '}') && depth > 0) {
-            --depth;
-        }
-    }
+    if (std::size_t const at = json_nesting_over(text, limit); at != std::string_view::npos)
+        throw scene_error(file, "", "JSON arrays and objects nest deeper than " + std::to_string(limit) +
+                                        " levels (at byte " + std::to_string(at) + "), over the limit of " +
+                                        (limit == max_depth ? std::string("--max-depth") : std::string("the glTF loader")));
 
     json root;
     try {

@@ -87,22 +87,8 @@ public:
             // parsing: one linear pass (a parser callback would make nlohmann-json 3.11.2 rescan
             // the enclosing array at each object's end, quadratic in an array of 10^5 nodes).
             std::uint64_t const max_nesting = default_limits().max_depth;
-            std::uint64_t depth = 0;
-            bool in_string = false, escaped = false;
-            for (char const c : text) {
-                if (in_string) {
-                    if (escaped) escaped = false;
-                    else if (c == '\\') escaped = true;
-                    else if (c == '"') in_string = false;
-                } else if (c == '"') {
-                    in_string = true;
-                } else if (c == '[' || c == '{') {
-                    if (++depth > max_nesting)
-                        check_limit(file_, "", depth, max_nesting, "levels of nested arrays and objects", "--max-depth");
-                } else if ((c == ']' || c == '}') && depth > 0) {
-                    --depth;
-                }
-            }
+            if (json_nesting_over(text, max_nesting) != std::string_view::npos)
+                check_limit(file_, "", max_nesting + 1, max_nesting, "levels of nested arrays and objects", "--max-depth");
             doc = json::parse(text.begin(), text.end());
         } catch (json::exception const& e) { // syntax errors, numbers that overflow a double
             throw scene_error(file_, "", parser_message(e.what()));
