@@ -1249,6 +1249,15 @@ using mask4 = basic_mask<4>;
 using mask8 = basic_mask<8>;
 using mask16 = basic_mask<16>;
 
+// Whether a·b + c with a single rounding (fma) is one instruction in this build (FMA3), rather
+// than std::fma lane by lane. Kernels that use fma only for speed check it.
+inline constexpr bool native_fma =
+#if defined(__FMA__)
+    true;
+#else
+    false;
+#endif
+
 // Whether N-lane vectors run on SIMD instructions in this build (false: the portable scalar
 // backend). Kernels choose their widths with it.
 template <int N>

@@ -6,7 +6,9 @@
 // box test runs is decided at compile time (node_tester):
 // - the intersector has its own box hook → the hook, once per child box (it sees every test);
 // - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls), with
-//   the ray's constants computed once per BVH (wide_box_ray);
+//   the ray's constants computed once per BVH (wide_box_ray); one fma per plane where the build
+//   has FMA and the ray's constants are finite (canopy.geometry:box, slab_offsets), else a
+//   subtraction and a product (the loop is built for each, chosen once per ray and BVH);
 // - otherwise (double rays, packets) → the library's box test, once per child box.
 // All three compute the same conservative test (canopy.geometry:box): same hits, same order. The
 // box tests of a ray are widened for its watertight triangle tests once per BVH entered with a
@@ -74,17 +76,24 @@ struct child_hits {
     std::array<S, bvh_width> tnear;
 };
 
-// The constants of the 8-wide box test for one scalar float ray, computed once per BVH: origin
-// and inverse direction in every lane, and which plane row is near and which far on each axis
-// (by the sign of the inverse direction, Ize 2013's ordered slabs: no select per node).
+// The constants of the 8-wide box test for one scalar float ray, computed once per BVH: in every
+// lane the inverse direction and either the fused test's offsets (Fused: canopy.geometry:box,
+// slab_offsets) or the near and far origins, and which plane row is near and which far on each
+// axis (by the sign of the inverse direction, Ize 2013's ordered slabs: no select per node).
+template <bool Fused>
 struct wide_box_ray {
     // Member functions of a class in a named module are not implicitly inline: say so, or
     // importers call them instead of inlining them.
     [[gnu::always_inline]] inline explicit wide_box_ray(prepared_ray<float> const& ray) {
         for (int a = 0; a < 3; ++a) {
             auto const k = std::size_t(a);
-            near_origin[k] = simd::float8(ray.near_origin[a]);
-            far_origin[k] = simd::float8(ray.far_origin[a]);
+            if constexpr (Fused) {
+                near_term[k] = simd::float8(-ray.slabs.near_offset[a]);
+                far_term[k] = simd::float8(-ray.slabs.far_offset[a]);
+            } else {
+                near_term[k] = simd::float8(ray.near_origin[a]);
+                far_term[k] = simd::float8(ray.far_origin[a]);
+            }
             inv_dir[k] = simd::float8(ray.inv_dir[a]);
             // -0 has no inverse of its own: 1/-0 = -inf counts as negative, as in canopy.geometry:box.
             bool const negative = ray.inv_dir[a] < 0.0f;
@@ -100,28 +109,39 @@ struct wide_box_ray {
         box_tmax8 = simd::float8(box_tmax);
     }
 
-    std::array<simd::float8, 3> near_origin, far_origin, inv_dir; // see prepared_ray::widen_box_tests_for
+    // The distance to plane row `row` of every child on axis a, near (or far) side.
+    [[gnu::always_inline]] inline simd::float8 distance(wide_bvh_node<float> const& node, std::size_t row,
+                                                        std::array<simd::float8, 3> const& term,
+                                                        std::size_t a) const {
+        auto const planes = simd::float8::load(node.planes[row].data());
+        if constexpr (Fused)
+            return simd::fma(planes, inv_dir[a], term[a]); // plane · r − origin · r, one rounding
+        else
+            return (planes - term[a]) * inv_dir[a];
+    }
+
+    // Fused: minus the offsets; else the near and far origins (prepared_ray::widen_box_tests_for).
+    std::array<simd::float8, 3> near_term, far_term, inv_dir;
     std::array<std::size_t, 3> near_row, far_row;
     simd::float8 tmin, box_tmax8;
     float box_tmax = 0.0f;
 };
 
 // All eight child boxes against one scalar float ray at once; lane by lane the arithmetic of
-// canopy.geometry:box. The far distances are scaled once, after their minimum: rounding is
-// monotonic, so min(fl(a·s), fl(b·s)) = fl(min(a, b)·s) exactly; NaN distances (a ray in a
-// slab's boundary plane) drop out of max/min on the same side as in the per-box test.
-[[gnu::always_inline]] inline child_hits<float> test_children_wide(wide_box_ray const& ray,
+// canopy.geometry:box (intersect_slabs_fused or intersect_slabs). The far distances are scaled
+// once, after their minimum: rounding is monotonic, so min(fl(a·s), fl(b·s)) = fl(min(a, b)·s)
+// exactly; NaN distances (a ray in a slab's boundary plane, subtraction form only) drop out of
+// max/min on the same side as in the per-box test.
+template <bool Fused>
+[[gnu::always_inline]] inline child_hits<float> test_children_wide(wide_box_ray<Fused> const& ray,
                                                                    wide_bvh_node<float> const& node) {
     using simd::float8;
     constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
     float8 tnear = ray.tmin;
     float8 tfar(std::numeric_limits<float>::infinity());
     for (std::size_t a = 0; a < 3; ++a) {
-        float8 const slab_near =
-            (float8::load(node.planes[ray.near_row[a]].data()) - ray.near_origin[a]) * ray.inv_dir[a];
-        float8 const slab_far = (float8::load(node.planes[ray.far_row[a]].data()) - ray.far_origin[a]) * ray.inv_dir[a];
-        tnear = simd::max(slab_near, tnear);
-        tfar = simd::min(slab_far, tfar);
+        tnear = simd::max(ray.distance(node, ray.near_row[a], ray.near_term, a), tnear);
+        tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, a), tfar);
     }
     tfar = simd::min(tfar * float8(far_scale), ray.box_tmax8);
     // Unused slots hold empty boxes, but a NaN or infinite ray can make any box look hit: they
@@ -168,7 +188,7 @@ template <typename T, typename S, typename I>
 inline constexpr bool uses_wide_box_test = std::is_same_v<T, float> && std::is_same_v<S, float> &&
                                            !box_hook_for<I, prepared_ray<T>, basic_aabb<S>, vec3<T>>;
 
-template <typename T, typename S, typename I>
+template <typename T, typename S, typename I, bool Fused = false>
 struct node_tester {
     node_tester(prepared_ray<T> const& r, I& i) : ray(r), isect(i) {}
 
@@ -180,9 +200,9 @@ struct node_tester {
     I& isect;
 };
 
-template <typename T, typename S, typename I>
+template <typename T, typename S, typename I, bool Fused>
     requires uses_wide_box_test<T, S, I>
-struct node_tester<T, S, I> {
+struct node_tester<T, S, I, Fused> {
     node_tester(prepared_ray<float> const& r, I&) : ray(r), box_ray(r) {}
 
     [[gnu::always_inline]] child_hits<float> test(wide_bvh_node<float> const& node) const {
@@ -192,7 +212,7 @@ struct node_tester<T, S, I> {
     void tmax_changed() { box_ray.set_tmax(ray.tmax); }
 
     prepared_ray<float> const& ray;
-    wide_box_ray box_ray;
+    wide_box_ray<Fused> box_ray;
 };
 
 // Starts loading the memory of the hit children (wide nodes, or a leaf's primitives) into the
@@ -313,31 +333,48 @@ template <typename T, typename Prim, typename I, typename Query>
 
 } // namespace detail
 
-// Traverses b with a prepared ray; returns true when the query asked to stop (any-hit found,
-// packet finished). ray.tmax is tightened as the query allows.
-template <typename T, typename Prim, typename I, typename Query>
-[[gnu::always_inline]] inline bool traverse(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect, Query& query) {
+namespace detail {
+
+// The traversal loop with one node tester (see the top of this file).
+template <typename Tester, typename T, typename Prim, typename I, typename Query>
+[[gnu::always_inline]] inline bool traverse_with(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect,
+                                                 Query& query) {
     using S = typename bvh<Prim>::value_type;
-    if (b.empty()) return false;
-    if constexpr (std::is_base_of_v<instance_path, Query>) ray.instances = &query;
-    detail::node_tester<T, S, I> nodes(ray, isect);
-    detail::traversal_stack<S> stack;
-    detail::traversal_entry<S> current{0, 0, S(0)};
+    Tester nodes(ray, isect);
+    traversal_stack<S> stack;
+    traversal_entry<S> current{0, 0, S(0)};
     for (;;) {
         if (current.count == 0) {
             auto const& node = b.wide_nodes[current.child];
             auto const hits = nodes.test(node);
             if (hits.mask != 0) {
-                detail::prefetch_children(b, node, hits.mask);
-                current = detail::order_children<Query::wants_near_first>(node, hits, stack);
+                prefetch_children(b, node, hits.mask);
+                current = order_children<Query::wants_near_first>(node, hits, stack);
                 continue;
             }
         } else {
-            if (detail::visit_leaf(ray, b, current.child, current.count, isect, query)) return true;
+            if (visit_leaf(ray, b, current.child, current.count, isect, query)) return true;
             nodes.tmax_changed();
         }
         if (!stack.pop_nearer_than(nodes.box_tmax(), current)) return false;
     }
+}
+
+} // namespace detail
+
+// Traverses b with a prepared ray; returns true when the query asked to stop (any-hit found,
+// packet finished). ray.tmax is tightened as the query allows. Scalar float rays whose box test
+// can take the fused form (canopy.geometry:box, slab_offsets) run the loop built for it.
+template <typename T, typename Prim, typename I, typename Query>
+[[gnu::always_inline]] inline bool traverse(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect, Query& query) {
+    using S = typename bvh<Prim>::value_type;
+    if (b.empty()) return false;
+    if constexpr (std::is_base_of_v<instance_path, Query>) ray.instances = &query;
+    if constexpr (detail::uses_wide_box_test<T, S, I> && simd::native_fma) {
+        if (uses_fused_slabs(ray))
+            return detail::traverse_with<detail::node_tester<T, S, I, true>>(ray, b, isect, query);
+    }
+    return detail::traverse_with<detail::node_tester<T, S, I>>(ray, b, isect, query);
 }
 
 // Traverses b with a plain ray (prepared here, once; the triangle shear waits for the first leaf);

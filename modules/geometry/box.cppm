@@ -14,6 +14,7 @@ module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
 // every path (scalar, SIMD, packet) rounds the same way.
 #pragma STDC FP_CONTRACT OFF
+#include <limits>
 #include <type_traits>
 export module canopy.geometry:box;
 import canopy.math;
@@ -64,6 +65,67 @@ template <typename T, typename S>
     return {tnear <= tfar, tnear, tfar};
 }
 
+// The per-ray constants of the fused slab test: the plane distances measured from the near and
+// far origins are fma(plane, inv_dir, -offset) with offset = origin · inv_dir rounded once per
+// ray, one instruction per plane instead of a subtraction and a product (Embree's form).
+// `usable` says, lane by lane, whether the fused form applies: direction, inv_dir and both
+// offsets finite (so inv_dir is also non-zero). Otherwise (a zero or infinite direction component, an origin so far out
+// that origin · inv_dir overflows) the ray keeps the subtraction form (intersect_slabs), whose
+// infinities and NaN are handled as described at the top of this file.
+//
+// Why it stays conservative: fma rounds once, so the fused distance is
+// fl(plane · r − fl(o · r)) = fl((plane − o(1 + ε)) · r) with |ε| ≤ u: the exact distance from an
+// origin moved by at most u·|o| along the axis, rounded once. The traversal's origins are moved
+// by at least 4u·|o| (box_margin_origins) beyond what the watertight test needs, which absorbs
+// that move; the rounding of r and of the fma is covered by the far scale 1 + 2γ3 as in Ize's
+// analysis (there, three roundings). With finite non-zero r and finite offsets no NaN can arise:
+// an empty slot's infinite planes give infinite distances of the right sign.
+template <typename T>
+struct slab_offsets {
+    vec3<T> near_offset, far_offset;
+    simd::mask_type_t<T> usable{};
+};
+
+template <typename T>
+[[gnu::always_inline]] inline slab_offsets<T> fused_slab_offsets(vec3<T> const& direction, vec3<T> const& inv_dir,
+                                                                 vec3<T> const& near_origin,
+                                                                 vec3<T> const& far_origin) {
+    slab_offsets<T> s;
+    // x − x is 0 for finite x and NaN for ±inf or NaN, and a NaN survives the sums: one
+    // comparison tells whether the direction (an infinite one has inv_dir 0), inv_dir and both
+    // offsets are all finite.
+    T finite(simd::scalar_type_t<T>(0));
+    for (int axis = 0; axis < 3; ++axis) {
+        s.near_offset[axis] = near_origin[axis] * inv_dir[axis];
+        s.far_offset[axis] = far_origin[axis] * inv_dir[axis];
+        finite = finite + (direction[axis] - direction[axis]) + (inv_dir[axis] - inv_dir[axis]) +
+                 (s.near_offset[axis] - s.near_offset[axis]) + (s.far_offset[axis] - s.far_offset[axis]);
+    }
+    s.usable = finite == T(simd::scalar_type_t<T>(0));
+    return s;
+}
+
+// The fused slab test (see slab_offsets), for lanes where offsets.usable holds; same hits as
+// intersect_slabs in the conservative sense, with tmax widened the same way.
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+[[gnu::always_inline]] inline box_hit<T> intersect_slabs_fused(basic_ray<T> const& ray, basic_aabb<S> const& box,
+                                                               vec3<T> const& inv_dir, slab_offsets<T> const& offsets) {
+    constexpr S far_scale = S(1) + S(2) * gamma<S>(3);
+    T tnear = ray.tmin;
+    T tfar(std::numeric_limits<S>::infinity());
+    for (int axis = 0; axis < 3; ++axis) {
+        auto const negative = inv_dir[axis] < T(0);
+        T const near_plane = simd::select(negative, T(box.max[axis]), T(box.min[axis]));
+        T const far_plane = simd::select(negative, T(box.min[axis]), T(box.max[axis]));
+        tnear = simd::max(simd::fma(near_plane, inv_dir[axis], -offsets.near_offset[axis]), tnear);
+        tfar = simd::min(simd::fma(far_plane, inv_dir[axis], -offsets.far_offset[axis]), tfar);
+    }
+    // One scaling after the minimum: rounding is monotonic, so this equals scaling each slab.
+    tfar = simd::min(tfar * T(far_scale), box_test_tmax(ray.tmax));
+    return {tnear <= tfar, tnear, tfar};
+}
+
 // Ray against an axis-aligned box. inv_dir must be 1 / ray.direction, component-wise.
 // hit: tmin ≤ tnear ≤ tfar ≤ tmax (in the conservative sense above).
 template <typename T, typename S>
@@ -90,7 +152,9 @@ template <typename T, typename S>
 //
 // δ is 2^-20·R (16u·R) with R bounded by the largest distance from the origin to `bounds`. The
 // moved origin must differ from the origin by at least δ once rounded, so the move is at least
-// 2^-22·|o| (two ulps): near a far-away origin, boxes grow by a few ulps of its coordinates.
+// 2^-21·|o| (four ulps or more; rounded, at least 4u·|o|): near a far-away origin, boxes grow by
+// a few ulps of its coordinates. The fused slab test (slab_offsets) may take back u·|o| of the
+// move; what remains, at least max(16u·R, 4u·|o|) − u·|o| ≥ 12u·R, still exceeds 6u·R.
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 void box_margin_origins(basic_ray<T> const& ray, vec3<T> const& inv_dir, basic_aabb<S> const& bounds,
@@ -102,7 +166,7 @@ void box_margin_origins(basic_ray<T> const& ray, vec3<T> const& inv_dir, basic_a
     }
     T const delta = reach * T(S(1.0 / 524288.0)); // 2 · 2^-20 · R: rounding the move keeps ≥ half
     for (int axis = 0; axis < 3; ++axis) {
-        T const move = simd::max(delta, simd::abs(ray.origin[axis]) * T(S(1.0 / 4194304.0)));
+        T const move = simd::max(delta, simd::abs(ray.origin[axis]) * T(S(1.0 / 2097152.0)));
         T const towards_near = simd::select(inv_dir[axis] < T(0), -move, move);
         near_origin[axis] = ray.origin[axis] + towards_near;
         far_origin[axis] = ray.origin[axis] - towards_near;

@@ -136,8 +136,9 @@ struct prepared_ray : basic_ray<T> {
     // once per BVH entered with a new ray, with the BVH's bounds (which hold every nested BVH
     // traversed with the same ray).
     template <typename S>
-    void widen_box_tests_for(basic_aabb<S> const& bounds) {
+    [[gnu::always_inline]] inline void widen_box_tests_for(basic_aabb<S> const& bounds) {
         box_margin_origins(static_cast<basic_ray<T> const&>(*this), inv_dir, bounds, near_origin, far_origin);
+        slabs = fused_slab_offsets(this->direction, inv_dir, near_origin, far_origin);
     }
 
     // Out of line: called once per ray from inside traversal loops, where inlining it would only
@@ -151,6 +152,7 @@ struct prepared_ray : basic_ray<T> {
     watertight_shear<T> shear;
     vec3<T> inv_dir;
     vec3<T> near_origin, far_origin; // where box tests measure near and far planes from
+    slab_offsets<T> slabs; // the fused box test's constants (canopy.geometry:box); set by widen_box_tests_for
     vec3<T> permuted_origin;
     bool has_shear = false;
     instance_path const* instances = nullptr;
@@ -173,11 +175,34 @@ std::span<std::uint32_t const> instance_ids(Ray const& ray) {
     return {};
 }
 
-// The box test of traversal: as the plain one, from the ray's widened origins.
+// The box test of traversal: as the plain one, from the ray's widened origins, in the fused form
+// where the build has FMA instructions and the ray allows it (slab_offsets), else the subtraction
+// form. inv_dir must be the ray's own (traversal passes ray.inv_dir). The 8-wide node test of
+// canopy.bvh makes the same choice per ray, so both give the same hits.
+template <typename T>
+[[gnu::always_inline]] inline bool uses_fused_slabs(prepared_ray<T> const& ray) {
+    if constexpr (!simd::native_fma)
+        return false;
+    else
+        return simd::all(ray.slabs.usable);
+}
+
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 [[gnu::always_inline]] inline box_hit<T> intersect(prepared_ray<T> const& ray, basic_aabb<S> const& box,
                                                    vec3<T> const& inv_dir) {
+    if constexpr (simd::native_fma) {
+        if (simd::all(ray.slabs.usable)) return intersect_slabs_fused(ray, box, inv_dir, ray.slabs);
+        if constexpr (simd::simd_width_v<T> != 1) {
+            if (simd::any(ray.slabs.usable)) {
+                auto const fused = intersect_slabs_fused(ray, box, inv_dir, ray.slabs);
+                auto const plain = intersect_slabs(ray, box, inv_dir, ray.near_origin, ray.far_origin);
+                auto const& use = ray.slabs.usable;
+                return {(use & fused.hit) | (!use & plain.hit), simd::select(use, fused.tnear, plain.tnear),
+                        simd::select(use, fused.tfar, plain.tfar)};
+            }
+        }
+    }
     return intersect_slabs(ray, box, inv_dir, ray.near_origin, ray.far_origin);
 }
 
