@@ -640,6 +640,53 @@ TEST_CASE("ray/box slab test is conservative: it never misses a box the exact sl
     CHECK(clear_misses > 5000);
 }
 
+TEST_CASE("the traversal's box test (widened origins, fused where it applies) never misses a box the exact slab test hits") {
+    // As above, through prepared_ray (box_margin_origins, then the fused form of slab_offsets
+    // where the build has FMA), with origins near and far from the world origin: the fused form
+    // rounds origin · inv_dir once per ray, which the origin margins must absorb.
+    random_source rng(61);
+    int exact_hits = 0, clear_misses = 0, fused = 0, nonzero = 0;
+    for (int i = 0; i < 60000; ++i) {
+        float const shift = (i % 3 == 0) ? 0.0f : (i % 3 == 1 ? 1000.0f : -65536.0f);
+        vec3<float> const lo = rng.dyadic_point({-4, -4, -4}, {0, 0, 0}, 10) + vec3<float>(shift);
+        canopy::aabb const box{lo, lo + rng.dyadic_point({0.25f, 0.25f, 0.25f}, {4, 4, 4}, 10)};
+        vec3<float> target((i & 1) ? box.min.x : box.max.x, (i & 2) ? box.min.y : box.max.y, (i & 4) ? box.min.z : box.max.z);
+        target[i % 3] = rng.dyadic(box.min[i % 3], box.max[i % 3], 10);
+        target = target + rng.dyadic_point({-0.001f, -0.001f, -0.001f}, {0.001f, 0.001f, 0.001f}, 10);
+        vec3<float> const origin = rng.dyadic_point({-12, -12, -12}, {12, 12, 12}, 10) + vec3<float>(shift);
+        ray r = make_ray(origin, target - origin, 0, inf);
+        if (i % 7 == 0) r.tmax = rng.dyadic(0, 2, 10);
+        canopy::prepared_ray<float> prepared(r, false);
+        prepared.widen_box_tests_for(box);
+        bool const no_zero = r.direction.x != 0.0f && r.direction.y != 0.0f && r.direction.z != 0.0f;
+        nonzero += no_zero ? 1 : 0;
+        // The fused form serves every ray with finite constants; rays along a plane keep the other.
+        CHECK(canopy::uses_fused_slabs(prepared) == (canopy::simd::native_fma && no_zero));
+        fused += canopy::uses_fused_slabs(prepared) ? 1 : 0;
+        long double gap = 0;
+        bool const exact = exact_slab_hit(r, prepared.inv_dir, box, gap);
+        auto const hr = intersect(prepared, box, prepared.inv_dir);
+        // Boxes grow by the origin margins (a few ulps of the coordinates, 2^-20 of the reach):
+        // a clear miss misses the box grown by more than that.
+        float const margin = 0x1p-18f * (std::fabs(shift) + 40.0f);
+        canopy::aabb const grown{box.min - vec3<float>(margin), box.max + vec3<float>(margin)};
+        long double grown_gap = 0;
+        exact_slab_hit(r, prepared.inv_dir, grown, grown_gap);
+        INFO("case " << i << ", shift " << shift);
+        if (exact) {
+            ++exact_hits;
+            CHECK(hr.hit);
+        } else if (grown_gap < -1e-6L) {
+            ++clear_misses;
+            CHECK_FALSE(hr.hit);
+        }
+    }
+    CHECK(exact_hits > 5000);
+    CHECK(clear_misses > 5000);
+    if constexpr (canopy::simd::native_fma) CHECK(fused == nonzero);
+    CHECK(nonzero > 59000);
+}
+
 TEST_CASE("ray/box slab test: grazing faces and edges, zero direction components, NaN") {
     canopy::aabb const box{{0, 0, 0}, {1, 1, 1}};
     for (int axis = 0; axis < 3; ++axis) {
