@@ -68,8 +68,7 @@ template <typename T, typename S>
 // The per-ray constants of the fused slab test: the plane distances measured from the near and
 // far origins are fma(plane, inv_dir, -offset) with offset = origin · inv_dir rounded once per
 // ray, one instruction per plane instead of a subtraction and a product (Embree's form).
-// `usable` says, lane by lane, whether the fused form applies: direction, inv_dir and both
-// offsets finite (so inv_dir is also non-zero). Otherwise (a zero or infinite direction component, an origin so far out
+// `usable` says, lane by lane, whether the fused form applies: inv_dir and both offsets finite. Otherwise (a zero or infinite direction component, an origin so far out
 // that origin · inv_dir overflows) the ray keeps the subtraction form (intersect_slabs), whose
 // infinities and NaN are handled as described at the top of this file.
 //
@@ -79,7 +78,9 @@ template <typename T, typename S>
 // by at least 4u·|o| (box_margin_origins) beyond what the watertight test needs, which absorbs
 // that move; the rounding of r and of the fma is covered by the far scale 1 + 2γ3 as in Ize's
 // analysis (there, three roundings). With finite non-zero r and finite offsets no NaN can arise:
-// an empty slot's infinite planes give infinite distances of the right sign.
+// an empty slot's infinite planes give infinite distances of the right sign (r = 0, from an
+// infinite direction component, gives NaN there as in the subtraction form; such slots are
+// masked by the traversal).
 template <typename T>
 struct slab_offsets {
     vec3<T> near_offset, far_offset;
@@ -87,19 +88,18 @@ struct slab_offsets {
 };
 
 template <typename T>
-[[gnu::always_inline]] inline slab_offsets<T> fused_slab_offsets(vec3<T> const& direction, vec3<T> const& inv_dir,
-                                                                 vec3<T> const& near_origin,
+[[gnu::always_inline]] inline slab_offsets<T> fused_slab_offsets(vec3<T> const& inv_dir, vec3<T> const& near_origin,
                                                                  vec3<T> const& far_origin) {
     slab_offsets<T> s;
     // x − x is 0 for finite x and NaN for ±inf or NaN, and a NaN survives the sums: one
-    // comparison tells whether the direction (an infinite one has inv_dir 0), inv_dir and both
-    // offsets are all finite.
+    // comparison tells whether inv_dir and both offsets are all finite. (An infinite direction
+    // component gives inv_dir 0 and offsets 0 on that axis: both forms then compute 0 there.)
     T finite(simd::scalar_type_t<T>(0));
     for (int axis = 0; axis < 3; ++axis) {
         s.near_offset[axis] = near_origin[axis] * inv_dir[axis];
         s.far_offset[axis] = far_origin[axis] * inv_dir[axis];
-        finite = finite + (direction[axis] - direction[axis]) + (inv_dir[axis] - inv_dir[axis]) +
-                 (s.near_offset[axis] - s.near_offset[axis]) + (s.far_offset[axis] - s.far_offset[axis]);
+        finite = finite + (inv_dir[axis] - inv_dir[axis]) + (s.near_offset[axis] - s.near_offset[axis]) +
+                 (s.far_offset[axis] - s.far_offset[axis]);
     }
     s.usable = finite == T(simd::scalar_type_t<T>(0));
     return s;

@@ -59,11 +59,13 @@ struct instance_path {
     std::array<std::uint32_t, max_instance_depth> ids{};
     int depth = 0;
 
-    void enter_instance(std::uint32_t id) { ids[std::size_t(depth++)] = id; }
-    void leave_instance() { --depth; }
+    // (inline: member functions in a named module are not implicitly inline, and these run at
+    // every instance entry.)
+    inline void enter_instance(std::uint32_t id) { ids[std::size_t(depth++)] = id; }
+    inline void leave_instance() { --depth; }
 
     template <typename T>
-    void stamp(basic_hit_record<T>& hr) const {
+    inline void stamp(basic_hit_record<T>& hr) const {
         using index_t = index_type_t<T>;
         hr.inst_id = depth > 0 ? index_t(ids[0]) : index_t(invalid_id);
         for (int k = 1; k < max_instance_depth; ++k)
