@@ -1,7 +1,9 @@
 // canopy.scene:graph — the scene graph: what loaders and generators build and compile() reads.
 //
 // A scene is a tree of nodes below root(), plus shared data the nodes refer to by index: meshes,
-// materials and images. Node kinds:
+// materials and images. A subtree may also be shared through children (attach() puts an existing
+// node under another parent, as the JSON loader does for a mesh file placed many times): it is
+// stored once and placed once per path, as if copied. Node kinds:
 //   group      children, nothing else
 //   transform  children placed by an affine object→parent transform
 //   mesh       one mesh (by index); several mesh nodes may share a mesh: it is built once
