@@ -32,6 +32,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using test_support::temp_folder;
+using test_support::limits_guard;
 using canopy::vec3;
 
 constexpr float inf = std::numeric_limits<float>::infinity();
@@ -753,12 +754,6 @@ TEST_CASE("assimp's textured box loads alike from .gltf, embedded .gltf and .glb
 
 namespace {
 
-// Restores canopy::default_limits() when it goes.
-struct limits_guard {
-    canopy::resource_limits saved = canopy::default_limits();
-    ~limits_guard() { canopy::default_limits() = saved; }
-};
-
 // The small quad file with `replace` substituted for the first `find` in its JSON text.
 fs::path small_file_with(fs::path const& file, std::string const& find, std::string const& replace,
                          small_file const& f = {}) {
@@ -1024,6 +1019,52 @@ TEST_CASE("glTF images of the same bytes or file are decoded once, and alpha fac
     REQUIRE(shared.width == 4);
     CHECK(shared.texels[5].w == 1.0f);
     CHECK(shared.texels[10].w == 0.0f);
+}
+
+TEST_CASE("glTF images count against --max-total-texels: embedded ones from when they are decoded") {
+    temp_folder const dir("canopy_gltf_test");
+    limits_guard const guard;
+    write_mask_png(dir.path / "mask.png"); // 4 × 4
+    auto const png = read_bytes(dir.path / "mask.png");
+    gltf_builder b;
+    int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
+    int const uv = b.vec2s({0, 1, 1, 1, 1, 0});
+    int const view = b.add_view(png.data(), png.size());
+    std::string primitives;
+    for (int m = 0; m < 2; ++m)
+        primitives += std::string(m ? ", " : "") + "{\"attributes\": {\"POSITION\": " + std::to_string(pos) +
+                      ", \"TEXCOORD_0\": " + std::to_string(uv) + "}, \"material\": " + std::to_string(m) + "}";
+    // Material 0 uses the file (read after the embedded image is decoded, before the scene holds
+    // it), material 1 the embedded image.
+    std::string const rest =
+        "\"meshes\": [{\"primitives\": [" + primitives + "]}], \"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}], "
+        "\"materials\": [{\"pbrMetallicRoughness\": {\"baseColorTexture\": {\"index\": 0}}}, "
+        "{\"pbrMetallicRoughness\": {\"baseColorTexture\": {\"index\": 1}}}], "
+        "\"textures\": [{\"source\": 0}, {\"source\": 1}], "
+        "\"images\": [{\"uri\": \"mask.png\"}, {\"bufferView\": " + std::to_string(view) + ", \"mimeType\": \"image/png\"}]";
+    fs::path const file = dir.path / "two.glb";
+    write_glb(file, b.document("{\"byteLength\": " + std::to_string(b.bin.size()) + "}", rest), b.bin);
+    auto const over = [](std::uint64_t held, std::uint64_t limit) {
+        return "image is 4 × 4 (16 texels): with the " + std::to_string(held) + " texels of the images loaded before it, " +
+               std::to_string(held + 16) + " texels in all exceed the limit of " + std::to_string(limit) +
+               " (--max-total-texels)";
+    };
+    canopy::default_limits().max_total_texels = 32;
+    {
+        canopy::scene s;
+        plugins().load(s, file);
+        CHECK(s.images().size() == 2);
+        CHECK(s.texels() == 32);
+        // Loaded again into the same scene: the embedded image is refused as it is decoded.
+        CHECK(test_support::message_of([&] { plugins().load(s, file); }) ==
+              file.string() + ": images[1]: embedded " + over(32, 32));
+        CHECK(s.texels() == 32);
+    }
+    canopy::default_limits().max_total_texels = 31;
+    CHECK(load_error(file) ==
+          file.string() + ": images[0]: 'mask.png': " + (dir.path / "mask.png").string() + ": " + over(16, 31));
+    canopy::default_limits().max_total_texels = 15;
+    CHECK(load_error(file) == file.string() + ": images[1]: embedded " + over(0, 15));
 }
 
 TEST_CASE("glTF meshes are held to --max-triangles together, before their accessors are read") {

@@ -30,6 +30,7 @@ namespace {
 namespace fs = std::filesystem;
 using test_support::load_failure;
 using test_support::message_of;
+using test_support::limits_guard;
 using test_support::temp_folder;
 using canopy::vec3;
 
@@ -321,6 +322,39 @@ TEST_CASE("json: shared file meshes trace the same hits as the same scene writte
             CHECK(ha.inst_id == hb.inst_id);
         }
     CHECK(hits > 600);
+}
+
+TEST_CASE("json: textures count against --max-total-texels together, a texture named twice is loaded once") {
+    temp_folder const tmp("canopy_json_test");
+    limits_guard const guard;
+    canopy::rgba_image img;
+    img.width = img.height = 4;
+    img.pixels.assign(64, 1.0f);
+    for (char const* name : {"a.png", "b.png", "c.png"}) canopy::write_image(tmp.path / name, img);
+    auto const file = tmp.write("textures.json", R"({"materials": [{"name": "a", "texture": "a.png"},
+      {"name": "a again", "texture": "./a.png"}, {"name": "b", "texture": "b.png"}, {"name": "c", "texture": "c.png"}]})");
+    auto const r = json_registry();
+    canopy::default_limits().max_total_texels = 48;
+    canopy::scene s;
+    r.load(s, file);
+    CHECK(s.images().size() == 3);
+    CHECK(s.texels() == 48);
+    CHECK(s.materials()[1].image == s.materials()[0].image);
+    canopy::default_limits().max_total_texels = 47;
+    auto const f = load_failure(r, file);
+    CHECK(f.where == "materials[3].texture");
+    CHECK(f.problem == (tmp.path / "c.png").string() +
+                           ": image is 4 × 4 (16 texels): with the 32 texels of the images loaded before it, 48 texels "
+                           "in all exceed the limit of 47 (--max-total-texels)");
+    // The images the scene holds already count: a second file loaded into the same scene.
+    canopy::default_limits().max_total_texels = 60;
+    canopy::scene two;
+    r.load(two, tmp.write("one.json", R"({"materials": [{"name": "a", "texture": "a.png"}]})"));
+    CHECK(message_of([&] { r.load(two, file); }) ==
+          file.string() + ": materials[3].texture: " + (tmp.path / "c.png").string() +
+              ": image is 4 × 4 (16 texels): with the 48 texels of the images loaded before it, 64 texels in all exceed "
+              "the limit of 60 (--max-total-texels)");
+    CHECK(two.texels() == 16);
 }
 
 TEST_CASE("json: instances target prototypes by name, ids default to the count of instances before them") {

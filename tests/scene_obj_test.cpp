@@ -31,6 +31,7 @@ namespace {
 namespace fs = std::filesystem;
 using test_support::load_failure;
 using test_support::temp_folder;
+using test_support::limits_guard;
 using namespace std::string_literals;
 using canopy::vec2;
 using canopy::vec3;
@@ -749,4 +750,30 @@ TEST_CASE("obj: a library named again and again is read once, materials naming t
         CHECK(s.materials()[std::size_t(i)].image == (i % 2 ? -1 : 0));
         CHECK(s.materials()[std::size_t(i)].alpha == (i % 2 ? canopy::alpha_mode::opaque : canopy::alpha_mode::mask));
     }
+}
+
+TEST_CASE("obj: textures count against --max-total-texels, a material's colour and alpha images together") {
+    temp_folder const tmp("canopy_obj_test");
+    limits_guard const guard;
+    auto const r = obj_registry();
+    std::vector<std::array<float, 4>> const texels(4, {1, 1, 1, 1});
+    write_png(tmp.path / "colour.png", 2, 2, texels);
+    write_png(tmp.path / "alpha.png", 2, 2, texels);
+    write_png(tmp.path / "other.png", 2, 2, texels);
+    tmp.write("lib.mtl", "newmtl a\nmap_Kd colour.png\nmap_d alpha.png\nnewmtl b\nmap_Kd other.png\n");
+    auto const file = tmp.write("two.obj", "mtllib lib.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 2 3\n");
+    // a holds one image of 4 texels (its alpha merged in), but both were decoded: 8 at the most,
+    // then b's 4.
+    canopy::default_limits().max_total_texels = 8;
+    canopy::scene s;
+    r.load(s, file);
+    CHECK(s.images().size() == 2);
+    CHECK(s.texels() == 8);
+    canopy::default_limits().max_total_texels = 7;
+    auto const f = load_failure(r, file);
+    CHECK(f.where == "3");
+    CHECK(f.problem == "texture 'alpha.png': " + (tmp.path / "alpha.png").string() +
+                           ": image is 2 × 2 (4 texels): with the 4 texels of the images loaded before it, 8 texels in "
+                           "all exceed the limit of 7 (--max-total-texels)");
+    CHECK(f.file == (tmp.path / "lib.mtl").string());
 }

@@ -38,6 +38,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using test_support::temp_folder;
+using test_support::limits_guard;
 using canopy::vec2;
 using canopy::vec3;
 
@@ -754,12 +755,6 @@ TEST_CASE("the openmesh plugin registers its extensions and keeps OpenMesh's mes
 // ---- Hostile files: what OpenMesh's readers would loop on, allocate for or misread ---------------
 
 namespace {
-
-// Restores canopy::default_limits() when it goes.
-struct limits_guard {
-    canopy::resource_limits saved = canopy::default_limits();
-    ~limits_guard() { canopy::default_limits() = saved; }
-};
 
 std::string triangle_ply(std::string const& format, std::string const& x_type, std::string const& body) {
     return "ply\nformat " + format + " 1.0\nelement vertex 3\nproperty " + x_type + " x\nproperty " + x_type +

@@ -1,4 +1,5 @@
-// Helpers shared by the scene and plugin tests: catching the scene_error that bad input must give.
+// Helpers shared by the scene and plugin tests: catching the scene_error that bad input must give,
+// and setting resource limits for one test.
 //
 // Include it after the test file's `import` lines (one of them must bring canopy.scene): it uses
 // <filesystem>, <string>, <string_view> and Catch2, which the test file includes before its
@@ -6,6 +7,13 @@
 #pragma once
 
 namespace test_support {
+
+// Sets canopy::default_limits() back to what it was when the guard was made, when it goes: a
+// test that lowers a limit cannot leave it lowered for the next, whatever it throws.
+struct limits_guard {
+    canopy::resource_limits saved = canopy::default_limits();
+    ~limits_guard() { canopy::default_limits() = saved; }
+};
 
 // The scene_error that f throws. A failed check if it throws none (the error returned then says
 // "(no scene_error)"); any other exception propagates.

@@ -536,7 +536,7 @@ TEST_CASE("the registry checks the file before its extension: folders, devices a
         ++calls;
         return s.add_group(parent);
     });
-    r.add_image_loader(".png", "test", [&](std::filesystem::path const&) {
+    r.add_image_loader(".png", "test", [&](std::filesystem::path const&, std::uint64_t) {
         ++calls;
         return canopy::image_data{};
     });

@@ -423,6 +423,7 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
         for (std::string const& text :
              {"--max-file-bytes N  bytes of one input file (default " + std::to_string(defaults.max_file_bytes),
               std::string("--max-texels N"), "(default " + std::to_string(defaults.max_texels),
+              std::string("--max-total-texels N"), "(default " + std::to_string(defaults.max_total_texels) + " = 2^28",
               std::string("--max-triangles N"), "(default " + std::to_string(defaults.max_triangles),
               "--max-placements N  mesh placements after instances are flattened (default " +
                   std::to_string(defaults.max_placements) + " = 2^22)",

@@ -53,6 +53,9 @@ struct file_access {
     // Images that are another's bytes (the same buffer bytes, data: URI or file): not decoded
     // again, but shared (image index → the first image of those bytes).
     std::map<int, int> same_as;
+    // The texel budget (--max-total-texels): the texels of the scene's images before this file,
+    // and of the embedded images decoded so far.
+    std::uint64_t texels_held = 0, embedded_texels = 0;
 };
 
 // tinygltf's own path of a uri: dlib::urldecode ('+' is a space) joined to the base folder.
@@ -164,11 +167,13 @@ bool decode_embedded_image(tinygltf::Image* image, int index, std::string* err, 
     auto const dimensions = image_size(bytes, size < 0 ? 0 : std::size_t(size));
     if (!dimensions) return refuse("embedded image is neither PNG nor JPEG");
     auto const [w, h] = *dimensions;
-    std::uint64_t const texels = std::uint64_t(w) * h;
     if (w == 0 || h == 0) return refuse("embedded image has no pixels (" + std::to_string(w) + " × " + std::to_string(h) + ")");
-    if (texels > default_limits().max_texels || w > (1u << 24) || h > (1u << 24))
-        return refuse("embedded image is " + std::to_string(w) + " × " + std::to_string(h) + " (" + std::to_string(texels) +
-                      " texels), over the limit of " + std::to_string(default_limits().max_texels) + " texels (--max-texels)");
+    std::string problem = texel_problem(w, h, access.texels_held + access.embedded_texels, default_limits().max_texels,
+                                        default_limits().max_total_texels);
+    if (problem.empty() && (w > (1u << 24) || h > (1u << 24)))
+        problem = "image is " + std::to_string(w) + " × " + std::to_string(h) + ", over the 2^24 texels per side stb_image decodes";
+    if (!problem.empty()) return refuse("embedded " + problem);
+    access.embedded_texels += std::uint64_t(w) * h;
     try {
         return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, nullptr);
     } catch (std::bad_alloc const&) {
@@ -282,9 +287,9 @@ std::string index_name(char const* array, T i) {
 class converter {
 public:
     converter(tinygltf::Model const& model, fs::path const& file, scene& s, registry const& r,
-              std::map<int, int> const& same_as)
+              std::map<int, int> const& same_as, std::uint64_t embedded_texels)
         : model_(model), file_(file), name_(file.string()), s_(s), r_(r), same_as_(same_as),
-          materials_(model.materials.size()), meshes_(model.meshes.size()) {
+          materials_(model.materials.size()), meshes_(model.meshes.size()), embedded_pending_(embedded_texels) {
         for (auto const& m : s.meshes()) {
             held_vertices_ += m.positions.size();
             held_triangles_ += m.triangles.size();
@@ -806,6 +811,8 @@ private:
         } else {
             img = decoded_image(index);
         }
+        // An embedded image was counted when it was decoded: now the scene holds it.
+        if (index >= 0 && !file) embedded_pending_ -= std::min<std::uint64_t>(embedded_pending_, img.texels.size());
         std::string const where = index < 0 ? std::string("materials") : index_name("images", index);
         int const id = guarded(where, [&] { return s_.add_image(std::move(img)); });
         images_.emplace(key, id);
@@ -823,7 +830,7 @@ private:
                 fail(where, "data: URI " + shown(im.uri) + " is not one tinygltf decodes (PNG or JPEG, base64)");
             fs::path const path = file_.parent_path() / decode_uri(im.uri);
             try {
-                out = r_.load_image(path);
+                out = r_.load_image(path, s_.texels() + embedded_pending_);
             } catch (scene_error const& e) {
                 fail(where, shown(im.uri) + ": " + e.what());
             }
@@ -880,6 +887,7 @@ private:
     std::uint64_t placements_ = 0;                         // mesh nodes this file made
     std::map<std::pair<int, double>, int> images_;
     std::map<fs::path, int> image_files_;
+    std::uint64_t embedded_pending_; // texels of embedded images decoded, not yet in the scene
 };
 
 // The JSON chunk of a .glb file, after checking its layout (glTF 2.0, §4.4: a 12-byte header,
@@ -921,6 +929,7 @@ node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id pa
     // The files tinygltf will ask for, as it names them.
     file_access access;
     access.base_dir = file.parent_path().string();
+    access.texels_held = s.texels();
     for (auto const& uri : uris.buffers)
         access.buffer_paths.push_back(uri.empty() || uri.starts_with("data:") ? "" : tinygltf_path(access.base_dir, uri));
     for (auto const& uri : uris.images)
@@ -978,7 +987,7 @@ node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id pa
                           "glTF " + shown(model.asset.version) + " is not supported (this loader reads glTF 2.0)");
     scene::mark const mark = s.make_mark();
     try {
-        return converter(model, file, s, r, access.same_as).run(parent);
+        return converter(model, file, s, r, access.same_as, access.embedded_texels).run(parent);
     } catch (...) {
         s.roll_back(mark);
         throw;

@@ -43,7 +43,8 @@
 // most 512), missing buffers and images, files that are not regular files or are over
 // --max-file-bytes (external buffers and images included; a file is looked for in the glTF file's
 // folder only), embedded images that are not PNG or JPEG or whose header claims more than
-// --max-texels texels (checked before decoding), meshes over --max-triangles (the scene's meshes
+// --max-texels texels or would bring the scene's images over --max-total-texels together (checked
+// before decoding; embedded images count from when they are decoded), meshes over --max-triangles (the scene's meshes
 // together, checked before a primitive is read), mesh placements over --max-placements, indices out of
 // range, NaN or infinite values, values beyond the float range, unsupported modes and component
 // types, a node with two parents, a node that is its own descendant (the message lists the

@@ -82,14 +82,16 @@ std::string canonical_name(fs::path const& file) {
     return (ec ? file : canonical).string();
 }
 
-// The mesh files loaded while one scene is loaded, nested scene files included: each file (with
-// its loader) is loaded once, and every mesh node that places it shares its node tree, so that
-// memory and work stay linear in the distinct files however often, and however deeply nested,
-// they are referred to. Keyed by canonical file name and loader; held by the outermost
-// parse_json_scene of a scene (active_files), on this thread.
+// The mesh files and textures loaded while one scene is loaded, nested scene files included: each
+// mesh file (with its loader) is loaded once, and every mesh node that places it shares its node
+// tree; each texture is loaded once, and every material naming it shares the image. So memory and
+// work stay linear in the distinct files however often, and however deeply nested, they are
+// referred to. Keyed by canonical file name (and loader); held by the outermost parse_json_scene
+// of a scene (active_files), on this thread.
 struct shared_files {
     scene const* s = nullptr;
     std::map<std::string, node_id> loaded;
+    std::map<std::string, int> images;
 };
 thread_local shared_files* active_files = nullptr;
 
@@ -266,7 +268,7 @@ private:
             std::string const texture = string(*t, p);
             registry const& r = plugins(p, "a texture");
             fs::path const file = relative(texture, p);
-            m.image = at(p, [&] { return s_.add_image(r.load_image(file)); });
+            m.image = at(p, [&] { return shared_image(r, file); });
         } else if (m.alpha == alpha_mode::mask) {
             fail(at_key(path, "alphaMode"), "MASK needs a texture (its alpha is the mask)");
         }
@@ -540,6 +542,16 @@ private:
         return loaded;
     }
 
+    // The image of `file`, loaded once for the whole load (see shared_files), within the texel
+    // budget of the scene's images (--max-total-texels).
+    int shared_image(registry const& r, fs::path const& file) {
+        std::string const key = canonical_name(file);
+        if (auto it = shared_files_->images.find(key); it != shared_files_->images.end()) return it->second;
+        int const image = s_.add_image(r.load_image(file, s_.texels()));
+        shared_files_->images.emplace(key, image);
+        return image;
+    }
+
     struct mesh_entry {
         std::uint32_t mesh = 0;
         node_id loaded = no_node; // file meshes: the node the file's loader made (kept out of the tree)
@@ -561,13 +573,14 @@ private:
 node_id parse_json_scene(std::string_view text, std::string const& file_name, registry const* r, scene& s,
                          node_id parent) {
     // The outermost load into `s` holds the shared files of every nested one.
-    shared_files own{&s, {}};
+    shared_files own{&s, {}, {}};
     shared_files* const outer = active_files;
     if (outer == nullptr || outer->s != &s) active_files = &own;
     auto const mark = s.make_mark();
     auto const fail = [&] {
         s.roll_back(mark);
         std::erase_if(active_files->loaded, [&](auto const& e) { return e.second >= mark.nodes; });
+        std::erase_if(active_files->images, [&](auto const& e) { return std::size_t(e.second) >= mark.images; });
         active_files = outer;
     };
     try {
