@@ -11,6 +11,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 #include <sys/stat.h>
@@ -615,26 +616,13 @@ TEST_CASE("json: only regular files are read: the scene, its mesh files and its 
     temp_folder const tmp("canopy_json_test");
     auto const& dir = tmp.path;
     auto const r = json_registry();
-    fs::create_directory(dir / "folder.json");
-    fs::create_directory(dir / "folder.obj");
-    fs::create_directory(dir / "folder.png");
-    fs::create_symlink("/dev/zero", dir / "zero.json");
-    fs::create_symlink("/dev/zero", dir / "zero.obj");
-    fs::create_symlink("/dev/zero", dir / "zero.png");
-    REQUIRE(::mkfifo((dir / "fifo.json").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.png").c_str(), 0600) == 0);
-    struct bad_case {
-        std::string name;
-        char const* kind;
-    };
-    for (auto const& [name, kind] : {bad_case{"folder", "a folder"}, bad_case{"zero", "a character device"},
-                                     bad_case{"fifo", "a FIFO"}}) {
+    REQUIRE(test_support::make_special_files(dir, {".json", ".obj", ".png"}));
+    for (auto const& [name, kind] : test_support::special_files()) {
         INFO(name);
         auto const scene = load_failure(r, dir / (name + ".json"));
         CHECK(scene.file == (dir / (name + ".json")).string());
         CHECK(scene.where == "");
-        CHECK(scene.problem == std::string("is ") + kind + ", not a regular file");
+        CHECK(scene.problem == "is " + kind + ", not a regular file");
 
         auto const mesh = load_failure(r, tmp.write("mesh_" + name + ".json",
                                                     R"({"meshes": [{"name": "m", "file": ")" + name + R"(.obj"}]})"));

@@ -8,9 +8,11 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -591,27 +593,14 @@ TEST_CASE("obj: only regular files are read: the OBJ, its material libraries and
     auto const& dir = tmp.path;
     auto const r = obj_registry();
     std::string const tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n";
-    fs::create_directory(dir / "folder.obj");
-    fs::create_directory(dir / "folder.mtl");
-    fs::create_directory(dir / "folder.png");
-    fs::create_symlink("/dev/zero", dir / "zero.obj");
-    fs::create_symlink("/dev/zero", dir / "zero.mtl");
-    fs::create_symlink("/dev/zero", dir / "zero.png");
-    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.mtl").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.png").c_str(), 0600) == 0);
-    struct bad_case {
-        std::string name;
-        char const* kind;
-    };
-    for (auto const& [name, kind] : {bad_case{"folder", "a folder"}, bad_case{"zero", "a character device"},
-                                     bad_case{"fifo", "a FIFO"}}) {
+    REQUIRE(test_support::make_special_files(dir, {".obj", ".mtl", ".png"}));
+    for (auto const& [name, kind] : test_support::special_files()) {
         INFO(name);
         // The .obj itself (the registry checks it before its extension).
         auto const obj = load_failure(r, dir / (name + ".obj"));
         CHECK(obj.file == (dir / (name + ".obj")).string());
         CHECK(obj.where == "");
-        CHECK(obj.problem == std::string("is ") + kind + ", not a regular file");
+        CHECK(obj.problem == "is " + kind + ", not a regular file");
         // A material library: named with the .obj line asking for it.
         auto const lib = load_failure(r, tmp.write("lib_" + name + ".obj", "mtllib " + name + ".mtl\n" + tri));
         CHECK(lib.file == (dir / ("lib_" + name + ".obj")).string());
