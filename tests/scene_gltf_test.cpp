@@ -475,20 +475,30 @@ TEST_CASE("a node with a multi-primitive mesh holds a group of one mesh node per
     CHECK(found);
 }
 
-TEST_CASE("sparse accessors replace the listed elements") {
-    temp_folder const dir("canopy_gltf_test");
+namespace {
+
+// A .gltf document of one triangle, (-1, -1, 0), (1, -1, 0), (1, 1, 0), whose positions accessor
+// has a sparse part replacing element `index` with (3, 4, 5).
+std::string sparse_triangle(std::uint8_t index) {
     gltf_builder b;
     int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
-    int const sparse_index = b.add_view(std::vector<std::uint8_t>{2}.data(), 1);
+    int const sparse_index = b.add_view(std::vector<std::uint8_t>{index}.data(), 1);
     std::vector<float> const moved{3, 4, 5};
     int const sparse_value = b.add_view(moved.data(), 12);
     b.accessors[std::size_t(pos)].insert(b.accessors[std::size_t(pos)].size() - 1,
                                          ", \"sparse\": {\"count\": 1, \"indices\": {\"bufferView\": " +
                                              std::to_string(sparse_index) + ", \"componentType\": 5121}, "
                                              "\"values\": {\"bufferView\": " + std::to_string(sparse_value) + "}}");
+    return b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": " +
+                                               std::to_string(pos) + "}}]}], \"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]");
+}
+
+} // namespace
+
+TEST_CASE("sparse accessors replace the listed elements") {
+    temp_folder const dir("canopy_gltf_test");
     fs::path const file = dir.path / "sparse.gltf";
-    write_text(file, b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
-                                                     "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+    write_text(file, sparse_triangle(2));
     canopy::scene s;
     plugins().load(s, file);
     REQUIRE(s.meshes().size() == 1);
@@ -615,18 +625,7 @@ TEST_CASE("bad glTF files give errors naming the file and the element") {
         expect(dir.path / "noimage.gltf", {"images[0]", "absent.png"});
     }
     SECTION("bad sparse index") {
-        gltf_builder b;
-        int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
-        int const sparse_index = b.add_view(std::vector<std::uint8_t>{3}.data(), 1);
-        std::vector<float> const moved{3, 4, 5};
-        int const sparse_value = b.add_view(moved.data(), 12);
-        b.accessors[std::size_t(pos)].insert(b.accessors[std::size_t(pos)].size() - 1,
-                                             ", \"sparse\": {\"count\": 1, \"indices\": {\"bufferView\": " +
-                                                 std::to_string(sparse_index) + ", \"componentType\": 5121}, "
-                                                 "\"values\": {\"bufferView\": " + std::to_string(sparse_value) + "}}");
-        write_text(dir.path / "sparse.gltf",
-                   b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
-                                                   "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+        write_text(dir.path / "sparse.gltf", sparse_triangle(3));
         expect(dir.path / "sparse.gltf", {"meshes[0].primitives[0]", "sparse index 3"});
     }
     SECTION("orthographic camera") {
