@@ -1,7 +1,9 @@
 // canopy.scene:graph — the scene graph: what loaders and generators build and compile() reads.
 //
 // A scene is a tree of nodes below root(), plus shared data the nodes refer to by index: meshes,
-// materials and images. Node kinds:
+// materials and images. A subtree may also be shared through children (attach() puts an existing
+// node under another parent, as the JSON loader does for a mesh file placed many times): it is
+// stored once and placed once per path, as if copied. Node kinds:
 //   group      children, nothing else
 //   transform  children placed by an affine object→parent transform
 //   mesh       one mesh (by index); several mesh nodes may share a mesh: it is built once
@@ -200,6 +202,8 @@ public:
     std::vector<mesh_data> const& meshes() const { return meshes_; }
     std::vector<material_data> const& materials() const { return materials_; }
     std::vector<image_data> const& images() const { return images_; }
+    // Texels of all the images together (what --max-total-texels limits).
+    std::uint64_t texels() const { return texels_; }
     material_data& material(std::size_t i) { return materials_.at(i); }
 
     // Shared data. add_mesh validates (see the file comment) and returns the mesh index.
@@ -221,6 +225,7 @@ public:
     int add_image(image_data i) {
         if (i.width <= 0 || i.height <= 0 || i.texels.size() != std::size_t(i.width) * std::size_t(i.height))
             throw scene_error(i.source, "", "image has no texels or a size that does not match them");
+        texels_ += i.texels.size();
         images_.push_back(std::move(i));
         return int(images_.size() - 1);
     }
@@ -295,6 +300,7 @@ public:
         nodes_.resize(m.nodes);
         meshes_.resize(m.meshes);
         materials_.resize(m.materials);
+        for (std::size_t i = m.images; i < images_.size(); ++i) texels_ -= images_[i].texels.size();
         images_.resize(m.images);
         // Children appended since the mark come off their parents' lists, newest first.
         while (appended_to_.size() > m.appended) {
@@ -369,6 +375,7 @@ private:
     std::vector<mesh_data> meshes_;
     std::vector<material_data> materials_;
     std::vector<image_data> images_;
+    std::uint64_t texels_ = 0; // of images_
     std::vector<node_id> appended_to_; // the parent of every child appended, in order
 };
 

@@ -23,6 +23,7 @@ module;
 #include <filesystem>
 #include <fstream>
 #include <ios>
+#include <limits>
 #include <new>
 #include <string>
 #include <string_view>
@@ -37,6 +38,10 @@ struct resource_limits {
     std::uint64_t max_file_bytes = std::uint64_t(4) << 30;
     // Texels of one image (width × height); 2^26 texels is 1 GiB as float RGBA. --max-texels
     std::uint64_t max_texels = std::uint64_t(1) << 26;
+    // Texels of all the images one scene holds together (each image counted once, however many
+    // materials use it, and a file's embedded images from when they are decoded); 2^28 texels is
+    // 4 GiB as float RGBA. --max-total-texels
+    std::uint64_t max_total_texels = std::uint64_t(1) << 28;
     // Triangles held by the scene's meshes together (each mesh counted once, however often it is
     // placed), and vertices likewise. --max-triangles
     std::uint64_t max_triangles = std::uint64_t(1) << 28;
@@ -172,6 +177,28 @@ inline std::size_t json_nesting_over(std::string_view text, std::uint64_t limit)
         }
     }
     return std::string_view::npos;
+}
+
+// What is wrong with an image of width × height texels, from its header, before it is decoded,
+// or "" when nothing is: over max_texels (--max-texels), or bringing the texels held — `held`,
+// those of the images the scene already holds or has decoded — over max_total_texels
+// (--max-total-texels). Image loaders call it with the header's size before allocating (the
+// registry passes them `held`: see registry::load_image).
+inline std::string texel_problem(std::uint64_t width, std::uint64_t height, std::uint64_t held, std::uint64_t max_texels,
+                                 std::uint64_t max_total_texels) {
+    std::string const size = std::to_string(width) + " × " + std::to_string(height);
+    // Each side is below 2^32 in every header read, so the product does not wrap.
+    std::uint64_t const texels = width * height;
+    if (texels > max_texels)
+        return "image is " + size + " (" + std::to_string(texels) + " texels), over the limit of " +
+               std::to_string(max_texels) + " texels (--max-texels)";
+    if (held > max_total_texels || texels > max_total_texels - held)
+        return "image is " + size + " (" + std::to_string(texels) + " texels): with the " + std::to_string(held) +
+               " texels of the images loaded before it, " +
+               (held > std::numeric_limits<std::uint64_t>::max() - texels ? std::string("more than 2^64")
+                                                                          : std::to_string(held + texels)) +
+               " texels in all exceed the limit of " + std::to_string(max_total_texels) + " (--max-total-texels)";
+    return {};
 }
 
 // Throws scene_error(file, where, ...) when `count` of `what` exceeds `limit`; the message names

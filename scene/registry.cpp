@@ -4,6 +4,7 @@ module;
 
 #include <algorithm>
 #include <cctype>
+#include <cstdint>
 #include <exception>
 #include <new>
 #include <filesystem>
@@ -129,7 +130,7 @@ node_id registry::load(scene& s, std::filesystem::path const& file, node_id pare
     });
 }
 
-image_data registry::load_image(std::filesystem::path const& file) const {
+image_data registry::load_image(std::filesystem::path const& file, std::uint64_t texels_held) const {
     require_regular_file(file, "texture");
     std::string const ext = extension_of(file);
     auto it = image_loaders_.find(ext);
@@ -137,7 +138,7 @@ image_data registry::load_image(std::filesystem::path const& file) const {
         throw scene_error(file.string(), "", "no image loader for extension '" + excerpt(ext) + "'");
     image_data img;
     try {
-        img = it->second.function(file);
+        img = it->second.function(file, texels_held);
     } catch (scene_error const&) {
         throw;
     } catch (std::bad_alloc const&) {
@@ -146,6 +147,12 @@ image_data registry::load_image(std::filesystem::path const& file) const {
         throw scene_error(file.string(), "", e.what());
     }
     if (img.source.empty()) img.source = file.string();
+    // A loader that let an image through its limits (after decoding it) is held to them all the same.
+    if (img.width > 0 && img.height > 0) {
+        std::string const problem = texel_problem(std::uint64_t(img.width), std::uint64_t(img.height), texels_held,
+                                                  default_limits().max_texels, default_limits().max_total_texels);
+        if (!problem.empty()) throw scene_error(file.string(), "", problem);
+    }
     return img;
 }
 

@@ -39,7 +39,7 @@ import :graph;
 export namespace canopy {
 
 // Version of the plugin interface (registry and scene types); raised on every incompatible change.
-inline constexpr unsigned plugin_abi_version = 1;
+inline constexpr unsigned plugin_abi_version = 2;
 
 class registry;
 
@@ -47,7 +47,11 @@ class registry;
 // file). Throws scene_error on bad input. `r` is the registry the load goes through (for
 // textures and files the file refers to).
 using file_loader = std::function<node_id(scene& s, std::filesystem::path const& file, node_id parent, registry const& r)>;
-using image_loader = std::function<image_data(std::filesystem::path const& file)>;
+// Reads an image file. texels_held: the texels of the images the scene being loaded holds
+// already; a loader refuses, from the file's header and before decoding, an image of more than
+// default_limits().max_texels texels or one that would bring the total over max_total_texels
+// (canopy.scene:limits' texel_problem gives the message).
+using image_loader = std::function<image_data(std::filesystem::path const& file, std::uint64_t texels_held)>;
 // Builds geometry under `parent` from `params`; returns the node it made.
 using generator = std::function<node_id(scene& s, node_id parent, parameters const& params)>;
 // Expands a custom node: builds its content under the node `self` from the node's parameters,
@@ -77,7 +81,11 @@ public:
     // such plugin for the extension, and whatever the loader reports. On error the scene is unchanged; errors that do not name
     // a file are given this one's name.
     node_id load(scene& s, std::filesystem::path const& file, node_id parent = 0, std::string_view plugin = {}) const;
-    image_data load_image(std::filesystem::path const& file) const;
+    // Reads an image with the loader of its extension. texels_held: the texels of the images the
+    // scene it is loaded for holds already (scene::texels(), plus any a loader holds decoded);
+    // the loader refuses before decoding an image over --max-texels or one that would bring the
+    // total over --max-total-texels, and an image a loader returned over either is refused here.
+    image_data load_image(std::filesystem::path const& file, std::uint64_t texels_held = 0) const;
     node_id generate(scene& s, std::string const& name, parameters const& params, node_id parent = 0) const;
     // Expands every custom node of the scene (also those made by expansions), in place.
     void expand_custom_nodes(scene& s) const;

@@ -4,10 +4,11 @@
 # [--limit-kib N] [--timeout S] [--keep] [FILTER...].
 #
 # It generates, in a temporary folder, a battery of hostile inputs (deep recursion, huge fan-outs,
-# devices / FIFOs / folders in every role, images claiming huge sizes, counts of 2*10^9, NaN/Inf
-# in every numeric field, truncated files of each format, random bytes, UTF-16, 10 MB tokens,
-# degenerate cameras and transforms, schema violations, malformed command-line numbers, unwritable
-# outputs) and runs each through `canopy info`, `render` (8x8) or `trace` under `ulimit -v` (the
+# devices / FIFOs / folders in every role, images claiming huge sizes, images over a total texel
+# budget, one mesh file referred to 10^5 times and through nested scene files, counts of 2*10^9,
+# NaN/Inf in every numeric field, truncated files of each format, damaged GLB headers and chunks,
+# random bytes, UTF-16, 10 MB tokens, degenerate cameras and transforms, schema violations,
+# malformed command-line numbers, unwritable outputs) and runs each through `canopy info`, `render` (8x8) or `trace` under `ulimit -v` (the
 # address-space limit, default 4 GiB) and `timeout` (default 30 s). Each case states its expected
 # outcome: an error (exit 1 or 2, the message names the file or option and matches a pattern) or
 # a success (exit 0, the output matches a pattern). A run is classified as
@@ -215,6 +216,51 @@ def build(d, canopy):
                                             meshes=[{"name": "t", "material": "m", "positions": [0, 0, 0, 1, 0, 0, 0, 1, 0],
                                                      "uvs": [0, 0, 1, 0, 0, 1], "indices": [0, 1, 2]}]))
         add("png-huge-json-%dx%d" % (w, h), R + [j(name + ".json")], "error", "texels|limit|image", name)
+    # small images over a small --max-total-texels: the texels of a scene's images together (ok.png is 2x2;
+    # each file once, however many materials name it), checked from each header before decoding
+    for k in range(3):
+        write(j("tex%d.png" % k), small_png())
+    tri_uv = {"name": "t", "material": "m0", "positions": [0, 0, 0, 1, 0, 0, 0, 1, 0], "uvs": [0, 0, 1, 0, 0, 1],
+              "indices": [0, 1, 2]}
+    write(j("textures3.json"), json_scene([{"type": "mesh", "mesh": "t"}], meshes=[tri_uv], materials=[
+        {"name": "m%d" % k, "texture": "tex%d.png" % (k % 3)} for k in range(6)]))
+    add("png-total-json-ok", ["info", j("textures3.json"), "--max-total-texels", "12"], "ok", r"3 images")
+    add("png-total-json-over", ["info", j("textures3.json"), "--max-total-texels", "11"], "error",
+        r"materials\[2\]\.texture: .*tex2\.png: image is 2 × 2 \(4 texels\): with the 8 texels of the images loaded "
+        r"before it, 12 texels in all exceed the limit of 11 \(--max-total-texels\)", "textures3.json")
+    write(j("textures2.mtl"), "newmtl a\nmap_Kd tex0.png\nmap_d tex1.png\nnewmtl b\nmap_Kd tex2.png\n")
+    write(j("textures2.obj"), "mtllib textures2.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 2 3\n")
+    # material a's colour image is held while its alpha image (merged into it) is read
+    add("png-total-obj-over", ["info", j("textures2.obj"), "--max-total-texels", "7"], "error",
+        r"textures2\.mtl:3: texture 'tex1\.png': .*with the 4 texels .* 8 texels in all exceed the limit of 7 "
+        r"\(--max-total-texels\)", "tex1.png")
+    add("png-total-obj-ok", ["info", j("textures2.obj"), "--max-total-texels", "8"], "ok", r"2 images")
+    doc = gltf_doc()
+    uv = struct.pack("<6f", 0, 0, 1, 0, 0, 1)
+    doc["buffers"].append({"byteLength": 24, "uri": "data:application/octet-stream;base64," + base64.b64encode(uv).decode()})
+    doc["bufferViews"].append({"buffer": 1, "byteLength": 24})
+    doc["accessors"].append({"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"})
+    prim = doc["meshes"][0]["primitives"][0]
+    prim["attributes"]["TEXCOORD_0"] = 1
+    doc["meshes"][0]["primitives"] = [dict(prim, material=k) for k in range(3)]
+    doc["images"] = [{"uri": "data:image/png;base64," + base64.b64encode(small_png()).decode()},
+                     {"uri": "data:image/png;base64," + base64.b64encode(small_png()[:-12] + png_chunk(b"tEXt", b"a\0b") +
+                                                                         small_png()[-12:]).decode()},
+                     {"uri": "tex0.png"}]
+    doc["textures"] = [{"source": k} for k in range(3)]
+    doc["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": k}}} for k in range(3)]
+    write(j("textures3.gltf"), json.dumps(doc))
+    add("png-total-gltf-ok", ["info", j("textures3.gltf"), "--max-total-texels", "12"], "ok", r"3 images")
+    add("png-total-gltf-embedded", ["info", j("textures3.gltf"), "--max-total-texels", "7"], "error",
+        r"images\[1\]: embedded image is 2 × 2 \(4 texels\): with the 4 texels .* 8 texels in all exceed the limit of 7 "
+        r"\(--max-total-texels\)", "textures3.gltf")
+    add("png-total-gltf-file", ["info", j("textures3.gltf"), "--max-total-texels", "11"], "error",
+        r"images\[2\]: 'tex0\.png': .*with the 8 texels .* 12 texels in all exceed the limit of 11", "textures3.gltf")
+    add("png-total-render", R + [j("textures3.json"), "--max-total-texels", "4"], "error", "--max-total-texels",
+        "textures3.json")
+    for bad in ["0", "-1", "1e9", "12x"]:
+        add("png-total-option-%s" % bad, ["info", j("textures3.json"), "--max-total-texels", bad], "error",
+            "--max-total-texels", None, codes=(2,))
     # a small image over a small --max-texels, a truncated PNG, random bytes as a PNG
     add("png-over-max-texels", ["info", j("huge_9000x9000.png.obj"), "--max-texels", "100"], "error", "max-texels",
         "huge_9000x9000.png")
@@ -288,6 +334,30 @@ def build(d, canopy):
     write(j("inst100k.json"), json_scene([{"type": "instance", "target": "p", "translate": [i % 300, i // 300, 0]}
                                           for i in range(10**5)], prototypes=[{"name": "p", "type": "mesh", "mesh": "t"}]))
     add("fanout-json-100k-instances", ["info", j("inst100k.json")], "ok", r"100000 placements")
+    # one OBJ referred to by 10^5 mesh nodes, and by 10^5 "meshes" entries: loaded once, its node tree
+    # shared (one node per reference: root, the file's group, 10^5 groups, the OBJ's holder, group, mesh)
+    write(j("fileref100k.json"), json_scene([{"type": "mesh", "mesh": "f"} for _ in range(10**5)],
+                                            meshes=[{"name": "f", "file": "tri.obj"}]))
+    add("fanout-json-file-100k-refs", ["info", j("fileref100k.json")], "ok",
+        r"graph: 100005 nodes, 1 meshes(.|\n)*100000 placements")
+    write(j("fileentries100k.json"), json_scene([{"type": "mesh", "mesh": "f%d" % i} for i in range(10**5)],
+                                                meshes=[{"name": "f%d" % i, "file": "tri.obj"} for i in range(10**5)]))
+    add("fanout-json-file-100k-entries", ["info", j("fileentries100k.json")], "ok",
+        r"graph: 100005 nodes, 1 meshes(.|\n)*100000 placements")
+    # scene files nesting references, 100 per level: nodes grow by one per reference, placements multiply and
+    # are counted before any is made
+    for lvl in range(5):
+        inner = "tri.obj" if lvl == 0 else "fileref_L%d.json" % (lvl - 1)
+        write(j("fileref_L%d.json" % lvl), json_scene(
+            [{"type": "transform", "translate": [0, 0, k], "children": [{"type": "mesh", "mesh": "f"}]} for k in range(100)],
+            meshes=[{"name": "f", "file": inner}]))
+    add("fanout-json-file-nested-10^4", ["info", j("fileref_L1.json")], "ok",
+        r"graph: 407 nodes, 1 meshes(.|\n)*10000 placements")
+    add("fanout-json-file-nested-10^6", ["info", j("fileref_L2.json")], "ok", r"1000000 placements", slow=True)
+    add("fanout-json-file-nested-10^10", ["info", j("fileref_L4.json")], "error",
+        r"fileref_L4\.json: 10000000000 meshes, instances, cameras and lights at the top level exceed the limit of "
+        r"4194304 \(--max-placements\)", "fileref_L4.json")
+    add("fanout-json-file-nested-10^8-render", R + [j("fileref_L3.json")], "error", "--max-placements", "fileref_L3.json")
     # 10^5 usemtl (two materials alternating, and 10^5 distinct undefined ones)
     write(j("two.mtl"), "newmtl a\nKd 1 0 0\nnewmtl b\nKd 0 1 0\n")
     with open(j("usemtl100k.obj"), "w") as f:
@@ -711,15 +781,44 @@ def build(d, canopy):
     gmut("image-missing", lambda d: (with_tex(d, 0), d["images"][0].update(uri="nothere.png")), "not found|nothere")
     gmut("image-source-big", lambda d: (with_tex(d, 0), d["textures"][0].update(source=8)), "source|image|range|index")
     gmut("required-extension", lambda d: d.update(extensionsRequired=["KHR_draco_mesh_compression"]), "extension|draco")
-    # GLB damage
+    # GLB damage: each fault named by the header, the chunk or the buffer, with the sizes at stake
     doc = gltf_doc()
     good = glb_bytes(doc)
-    for tag, data in [("length-lie", good[:8] + struct.pack("<I", 10**9) + good[12:]),
-                      ("chunk-length-lie", good[:12] + struct.pack("<I", 10**9) + good[16:]),
-                      ("bad-magic", b"glTx" + good[4:]), ("version-1", good[:4] + struct.pack("<I", 1) + good[8:]),
-                      ("header-only", good[:12]), ("bin-missing", glb_bytes(dict(doc, buffers=[{"byteLength": 36}])))]:
+    size = len(good)
+    bin_doc = dict(doc, buffers=[{"byteLength": 36}])
+    with_bin = glb_bytes(bin_doc, struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0))
+    json_end = 20 + struct.unpack("<I", with_bin[12:16])[0]
+    def relength(data):
+        return data[:8] + struct.pack("<I", len(data)) + data[12:]
+    for tag, data, pattern in [
+            ("length-lie", good[:8] + struct.pack("<I", 10**9) + good[12:],
+             r"GLB header: length 1000000000 runs past the end of the file \(%d bytes\)" % size),
+            ("length-short", good + b"    ", r"GLB header: length %d ends before the end of the file \(%d bytes\)" % (size, size + 4)),
+            ("chunk-length-lie", good[:12] + struct.pack("<I", 10**9) + good[16:],
+             r"chunk 0: length 1000000000 runs past the end of the file \(%d bytes\)" % size),
+            ("bad-magic", b"glTx" + good[4:], r"GLB header: magic is 'glTx', expected 'glTF'"),
+            ("json-as-glb", json.dumps(doc).encode(), r"GLB header: magic is '\{\"as', expected 'glTF'"),
+            ("binary-magic", b"\x89PNG" + good[4:], r"GLB header: magic is '\\x89PNG', expected 'glTF'"),
+            ("version-1", good[:4] + struct.pack("<I", 1) + good[8:], r"GLB header: version is 1, expected 2"),
+            ("header-only", good[:12], r"GLB header: length %d runs past the end of the file \(12 bytes\)" % size),
+            ("header-alone", relength(good[:12]), r"GLB header: no chunk follows the header"),
+            ("tiny", good[:7], r"GLB header: the file has 7 bytes, fewer than the header's 12"),
+            ("bin-first", good[:16] + b"BIN\0" + good[20:], r"chunk 0: type is 'BIN\\x00', expected 'JSON'"),
+            ("bin-length-lie", with_bin[:json_end] + struct.pack("<I", 99999) + with_bin[json_end + 4:],
+             r"chunk 1: length 99999 runs past the end of the file \(%d bytes\)" % len(with_bin)),
+            ("bin-cut", relength(with_bin[:json_end + 4]),
+             r"chunk 1: its 8-byte header at byte %d runs past the end of the file" % json_end),
+            ("bin-missing", glb_bytes(bin_doc), r"buffers\[0\]: has no uri and the file has no BIN chunk"),
+            ("bin-short", relength(with_bin[:json_end] + struct.pack("<I", 8) + b"BIN\0" + b"\0" * 8),
+             r"buffers\[0\]: byteLength 36 is more than the 8 bytes of the BIN chunk")]:
         write(j("glb_%s.glb" % tag), data)
-        add("glb-%s" % tag, ["info", j("glb_%s.glb" % tag)], "error", ".", "glb_%s.glb" % tag)
+        add("glb-%s" % tag, ["info", j("glb_%s.glb" % tag)], "error", pattern, "glb_%s.glb" % tag)
+    # a chunk of an unknown type after BIN is skipped, as glTF asks
+    write(j("glb_extra-chunk.glb"), relength(with_bin + struct.pack("<I", 4) + b"XTRA" + b"abcd"))
+    add("glb-extra-chunk", ["info", j("glb_extra-chunk.glb")], "ok", r"1 meshes")
+    write(j("gltf_no-uri.gltf"), json.dumps(bin_doc))
+    add("glb-gltf-buffer-without-uri", ["info", j("gltf_no-uri.gltf")], "error",
+        r"buffers\[0\]: has no uri \(only the first buffer of a \.glb file", "gltf_no-uri.gltf")
 
     # truncated files of each format --------------------------------------------------------------------------
     bases = {"ply": PLY_ASCII.encode(), "plyb": ply_binary(), "off": OFF_ASCII.encode(), "stl": STL_ASCII.encode(),

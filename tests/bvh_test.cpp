@@ -80,13 +80,13 @@ struct walk_result {
     double sah_cost = 0;                  // Σ area(node)/area(root) · (traversal or count · intersection)
 };
 
-template <typename Prim>
-walk_result walk(canopy::bvh<Prim> const& b, canopy::sah_costs costs = {}) {
-    walk_result w;
-    w.primitive_owners.assign(b.primitive_count(), 0);
-    if (b.nodes.empty()) return w;
-    std::vector<int> reached(b.nodes.size(), 0);
-    double const root_area = double(surface_area(b.nodes[0].bounds));
+// Depth first from node 0 of `count` nodes: visit(node, push) for each node reached once, push(child)
+// stacking a child one level down. A node out of range or reached twice clears w.structure_ok;
+// w.nodes_reached and w.levels count what was reached.
+template <typename Walk, typename Visit>
+void walk_nodes(std::size_t count, Walk& w, Visit&& visit) {
+    if (count == 0) return;
+    std::vector<int> reached(count, 0);
     struct item {
         std::uint32_t node;
         int level;
@@ -95,39 +95,58 @@ walk_result walk(canopy::bvh<Prim> const& b, canopy::sah_costs costs = {}) {
     while (!stack.empty()) {
         item const it = stack.back();
         stack.pop_back();
-        if (it.node >= b.nodes.size() || reached[it.node]++) {
+        if (it.node >= count || reached[it.node]++) {
             w.structure_ok = false;
             continue;
         }
         ++w.nodes_reached;
         w.levels = std::max(w.levels, it.level);
-        auto const& node = b.nodes[it.node];
+        visit(it.node, [&](std::uint32_t child) { stack.push_back({child, it.level + 1}); });
+    }
+}
+
+// The `count` primitives of a leaf from `index`: each counted in w.primitive_owners, and
+// bounds_ok cleared unless `box` holds it; an index out of range clears w.structure_ok.
+template <typename Prim, typename Walk>
+void own_leaf(canopy::bvh<Prim> const& b, std::uint32_t index, std::uint32_t count, canopy::aabb const& box, Walk& w,
+              bool& bounds_ok) {
+    bool const in_range = visit_leaf(b, index, count, [&](std::size_t key, Prim const& p) {
+        if (key >= w.primitive_owners.size()) {
+            w.structure_ok = false;
+            return;
+        }
+        ++w.primitive_owners[key];
+        bounds_ok = bounds_ok && box_contains(box, get_bounds(p));
+    });
+    if (!in_range) w.structure_ok = false;
+}
+
+template <typename Prim>
+walk_result walk(canopy::bvh<Prim> const& b, canopy::sah_costs costs = {}) {
+    walk_result w;
+    w.primitive_owners.assign(b.primitive_count(), 0);
+    if (b.nodes.empty()) return w;
+    double const root_area = double(surface_area(b.nodes[0].bounds));
+    walk_nodes(b.nodes.size(), w, [&](std::uint32_t index, auto&& push) {
+        auto const& node = b.nodes[index];
         double const rel = root_area > 0 ? double(surface_area(node.bounds)) / root_area : 1.0;
         if (node.count > 0) {
             ++w.leaves;
             w.max_leaf = std::max<std::size_t>(w.max_leaf, node.count);
             w.sah_cost += rel * double(costs.intersection) * double(node.count);
-            bool const in_range = visit_leaf(b, node.index, node.count, [&](std::size_t key, Prim const& p) {
-                if (key >= w.primitive_owners.size()) {
-                    w.structure_ok = false;
-                    return;
-                }
-                ++w.primitive_owners[key];
-                w.leaf_bounds_ok = w.leaf_bounds_ok && box_contains(node.bounds, get_bounds(p));
-            });
-            if (!in_range) w.structure_ok = false;
+            own_leaf(b, node.index, node.count, node.bounds, w, w.leaf_bounds_ok);
         } else {
             w.sah_cost += rel * double(costs.traversal);
             if (std::size_t(node.index) + 1 >= b.nodes.size()) {
                 w.structure_ok = false;
-                continue;
+                return;
             }
             w.inner_bounds_ok = w.inner_bounds_ok && box_contains(node.bounds, b.nodes[node.index].bounds) &&
                                 box_contains(node.bounds, b.nodes[node.index + 1].bounds);
-            stack.push_back({node.index, it.level + 1});
-            stack.push_back({node.index + 1, it.level + 1});
+            push(node.index);
+            push(node.index + 1);
         }
-    }
+    });
     return w;
 }
 
@@ -146,28 +165,13 @@ template <typename Prim>
 wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
     wide_walk_result w;
     w.primitive_owners.assign(b.primitive_count(), 0);
-    if (b.wide_nodes.empty()) return w;
-    std::vector<int> reached(b.wide_nodes.size(), 0);
-    struct item {
-        std::uint32_t node;
-        int level;
-    };
-    std::vector<item> stack{{0, 1}};
-    while (!stack.empty()) {
-        item const it = stack.back();
-        stack.pop_back();
-        if (it.node >= b.wide_nodes.size() || reached[it.node]++) {
-            w.structure_ok = false;
-            continue;
-        }
-        ++w.nodes_reached;
-        w.levels = std::max(w.levels, it.level);
-        auto const& node = b.wide_nodes[it.node];
+    walk_nodes(b.wide_nodes.size(), w, [&](std::uint32_t index, auto&& push) {
+        auto const& node = b.wide_nodes[index];
         bool seen_unused = false;
         for (int i = 0; i < canopy::bvh_width; ++i) {
             auto const k = std::size_t(i);
             auto const box = node.child_bounds(i);
-            if (it.node == 0) w.root_union = extend(w.root_union, box);
+            if (index == 0) w.root_union = extend(w.root_union, box);
             if (!node.used(i)) {
                 seen_unused = true;
                 w.unused_ok = w.unused_ok && node.count[k] == 0 && canopy::is_empty(box);
@@ -175,15 +179,7 @@ wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
             }
             w.structure_ok = w.structure_ok && !seen_unused;
             if (node.count[k] > 0) {
-                bool const in_range = visit_leaf(b, node.child[k], node.count[k], [&](std::size_t key, Prim const& p) {
-                    if (key >= w.primitive_owners.size()) {
-                        w.structure_ok = false;
-                        return;
-                    }
-                    ++w.primitive_owners[key];
-                    w.bounds_ok = w.bounds_ok && box_contains(box, get_bounds(p));
-                });
-                if (!in_range) w.structure_ok = false;
+                own_leaf(b, node.child[k], node.count[k], box, w, w.bounds_ok);
             } else {
                 if (node.child[k] >= b.wide_nodes.size()) {
                     w.structure_ok = false;
@@ -192,10 +188,10 @@ wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
                 auto const& child = b.wide_nodes[node.child[k]];
                 for (int j = 0; j < canopy::bvh_width; ++j)
                     if (child.used(j)) w.bounds_ok = w.bounds_ok && box_contains(box, child.child_bounds(j));
-                stack.push_back({node.child[k], it.level + 1});
+                push(node.child[k]);
             }
         }
-    }
+    });
     return w;
 }
 

@@ -137,13 +137,36 @@ TEST_CASE("watertight triangle test returns the hand-computed t, u, v") {
     CHECK(miss.prim_id == canopy::invalid_id);
 }
 
+namespace {
+
+// The largest errors of hits against their long-double references, in units of κ u_f.
+struct reference_errors {
+    long double worst_uv = 0, worst_t = 0;
+
+    // Checks hit `hr` against `ref`: t within tolerance_t relative, u and v within tolerance_uv;
+    // keeps the largest errors in units of the condition numbers κ_uv and κ_t times u_f.
+    template <typename Hit, typename Ref>
+    void check(Hit const& hr, Ref const& ref, long double kappa_uv, long double kappa_t, long double tolerance_uv,
+               long double tolerance_t) {
+        constexpr long double unit_roundoff = std::numeric_limits<float>::epsilon() / 2;
+        worst_uv = std::max({worst_uv, std::fabs(hr.u - ref.u) / (kappa_uv * unit_roundoff),
+                             std::fabs(hr.v - ref.v) / (kappa_uv * unit_roundoff)});
+        worst_t = std::max(worst_t, std::fabs(hr.t - ref.t) / (ref.t * kappa_t * unit_roundoff));
+        CHECK(std::fabs(hr.t - ref.t) <= tolerance_t * ref.t);
+        CHECK(std::fabs(hr.u - ref.u) <= tolerance_uv);
+        CHECK(std::fabs(hr.v - ref.v) <= tolerance_uv);
+    }
+};
+
+} // namespace
+
 TEST_CASE("watertight triangle test agrees with Cramer's rule in long double") {
     // Forward error bounds: u, v within 32 κ_uv u_f, t within 32 κ_t u_f relative (the largest
     // errors seen are about 1 κ_uv u_f and 4 κ_t u_f).
     constexpr long double unit_roundoff = std::numeric_limits<float>::epsilon() / 2;
     random_source rng(11);
     int compared = 0;
-    long double worst_uv = 0, worst_t = 0;
+    reference_errors errors;
     for (int i = 0; i < 20000; ++i) {
         triangle const tri = random_triangle(rng, 5.0f, 2.0f);
         ray const r = random_ray_towards(rng, tri);
@@ -159,14 +182,9 @@ TEST_CASE("watertight triangle test agrees with Cramer's rule in long double") {
         REQUIRE(hr.hit == (ref.margin() > 0));
         if (!hr.hit) continue;
         ++compared;
-        worst_uv = std::max({worst_uv, std::fabs(hr.u - ref.u) / (kappa_uv * unit_roundoff),
-                             std::fabs(hr.v - ref.v) / (kappa_uv * unit_roundoff)});
-        worst_t = std::max(worst_t, std::fabs(hr.t - ref.t) / (ref.t * kappa_t * unit_roundoff));
-        CHECK(std::fabs(hr.t - ref.t) <= tolerance_t * ref.t);
-        CHECK(std::fabs(hr.u - ref.u) <= tolerance_uv);
-        CHECK(std::fabs(hr.v - ref.v) <= tolerance_uv);
+        errors.check(hr, ref, kappa_uv, kappa_t, tolerance_uv, tolerance_t);
     }
-    INFO("largest errors in units of kappa u_f: u, v " << double(worst_uv) << ", t " << double(worst_t));
+    INFO("largest errors in units of kappa u_f: u, v " << double(errors.worst_uv) << ", t " << double(errors.worst_t));
     CHECK(compared > 5000);
 }
 
@@ -411,7 +429,7 @@ TEST_CASE("Möller–Trumbore agrees with the watertight test away from edges") 
     constexpr long double unit_roundoff = std::numeric_limits<float>::epsilon() / 2;
     random_source rng(12);
     int hits = 0, misses = 0;
-    long double worst_uv = 0, worst_t = 0;
+    reference_errors errors;
     for (int i = 0; i < 20000; ++i) {
         triangle tri = random_triangle(rng, 5.0f, 2.0f);
         tri.prim_id = std::uint32_t(i);
@@ -431,16 +449,11 @@ TEST_CASE("Möller–Trumbore agrees with the watertight test away from edges") 
             continue;
         }
         ++hits;
-        worst_uv = std::max({worst_uv, std::fabs(mt.u - ref.u) / (kappa_uv * unit_roundoff),
-                             std::fabs(mt.v - ref.v) / (kappa_uv * unit_roundoff)});
-        worst_t = std::max(worst_t, std::fabs(mt.t - ref.t) / (ref.t * kappa_t * unit_roundoff));
-        CHECK(std::fabs(mt.t - ref.t) <= tolerance_t * ref.t);
-        CHECK(std::fabs(mt.u - ref.u) <= tolerance_uv);
-        CHECK(std::fabs(mt.v - ref.v) <= tolerance_uv);
+        errors.check(mt, ref, kappa_uv, kappa_t, tolerance_uv, tolerance_t);
         CHECK(std::fabs(mt.t - wt.t) <= 2 * tolerance_t * ref.t);
         CHECK(mt.prim_id == wt.prim_id);
     }
-    INFO("largest errors in units of kappa u_f: u, v " << double(worst_uv) << ", t " << double(worst_t));
+    INFO("largest errors in units of kappa u_f: u, v " << double(errors.worst_uv) << ", t " << double(errors.worst_t));
     CHECK(hits > 2000);
     CHECK(misses > 2000);
 }

@@ -7,11 +7,13 @@
 #include <catch2/catch.hpp>
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -331,14 +333,7 @@ TEST_CASE("broken and odd OBJ files of assimp-testmodels: errors with lines, or 
 TEST_CASE("bench readers: counts grow within the limits, byte sizes of rays and hits are checked, messages stay short") {
     temp_folder const tmp("canopy_scene_bench_test");
     fs::path const& folder = tmp.path;
-    auto const message = [](auto&& f) -> std::string {
-        try {
-            f();
-        } catch (canopy::format_error const& e) {
-            return e.what();
-        }
-        return "(no format_error)";
-    };
+    auto const message = [](auto&& f) { return test_support::what_of<canopy::format_error>(f); };
     write(folder / "three.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 3\nf 1 2 3\n");
     write(folder / "two.inst", "mesh three.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 5 0 1 0 0 0 0 1 0\n");
     auto const saved = canopy::default_limits();

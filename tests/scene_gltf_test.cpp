@@ -15,6 +15,7 @@
 #include <iterator>
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using test_support::temp_folder;
+using test_support::limits_guard;
 using canopy::vec3;
 
 constexpr float inf = std::numeric_limits<float>::infinity();
@@ -473,20 +475,30 @@ TEST_CASE("a node with a multi-primitive mesh holds a group of one mesh node per
     CHECK(found);
 }
 
-TEST_CASE("sparse accessors replace the listed elements") {
-    temp_folder const dir("canopy_gltf_test");
+namespace {
+
+// A .gltf document of one triangle, (-1, -1, 0), (1, -1, 0), (1, 1, 0), whose positions accessor
+// has a sparse part replacing element `index` with (3, 4, 5).
+std::string sparse_triangle(std::uint8_t index) {
     gltf_builder b;
     int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
-    int const sparse_index = b.add_view(std::vector<std::uint8_t>{2}.data(), 1);
+    int const sparse_index = b.add_view(std::vector<std::uint8_t>{index}.data(), 1);
     std::vector<float> const moved{3, 4, 5};
     int const sparse_value = b.add_view(moved.data(), 12);
     b.accessors[std::size_t(pos)].insert(b.accessors[std::size_t(pos)].size() - 1,
                                          ", \"sparse\": {\"count\": 1, \"indices\": {\"bufferView\": " +
                                              std::to_string(sparse_index) + ", \"componentType\": 5121}, "
                                              "\"values\": {\"bufferView\": " + std::to_string(sparse_value) + "}}");
+    return b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": " +
+                                               std::to_string(pos) + "}}]}], \"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]");
+}
+
+} // namespace
+
+TEST_CASE("sparse accessors replace the listed elements") {
+    temp_folder const dir("canopy_gltf_test");
     fs::path const file = dir.path / "sparse.gltf";
-    write_text(file, b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
-                                                     "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+    write_text(file, sparse_triangle(2));
     canopy::scene s;
     plugins().load(s, file);
     REQUIRE(s.meshes().size() == 1);
@@ -613,18 +625,7 @@ TEST_CASE("bad glTF files give errors naming the file and the element") {
         expect(dir.path / "noimage.gltf", {"images[0]", "absent.png"});
     }
     SECTION("bad sparse index") {
-        gltf_builder b;
-        int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
-        int const sparse_index = b.add_view(std::vector<std::uint8_t>{3}.data(), 1);
-        std::vector<float> const moved{3, 4, 5};
-        int const sparse_value = b.add_view(moved.data(), 12);
-        b.accessors[std::size_t(pos)].insert(b.accessors[std::size_t(pos)].size() - 1,
-                                             ", \"sparse\": {\"count\": 1, \"indices\": {\"bufferView\": " +
-                                                 std::to_string(sparse_index) + ", \"componentType\": 5121}, "
-                                                 "\"values\": {\"bufferView\": " + std::to_string(sparse_value) + "}}");
-        write_text(dir.path / "sparse.gltf",
-                   b.document(b.embedded_buffer(), "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], "
-                                                   "\"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]"));
+        write_text(dir.path / "sparse.gltf", sparse_triangle(3));
         expect(dir.path / "sparse.gltf", {"meshes[0].primitives[0]", "sparse index 3"});
     }
     SECTION("orthographic camera") {
@@ -752,12 +753,6 @@ TEST_CASE("assimp's textured box loads alike from .gltf, embedded .gltf and .glb
 // ---- Schema violations, hostile hierarchies and files ---------------------------------------------
 
 namespace {
-
-// Restores canopy::default_limits() when it goes.
-struct limits_guard {
-    canopy::resource_limits saved = canopy::default_limits();
-    ~limits_guard() { canopy::default_limits() = saved; }
-};
 
 // The small quad file with `replace` substituted for the first `find` in its JSON text.
 fs::path small_file_with(fs::path const& file, std::string const& find, std::string const& replace,
@@ -965,17 +960,78 @@ TEST_CASE("glTF buffers and images that are devices, huge or not images are refu
     CHECK_THAT(webp, Catch::Contains("webp.gltf: images[0]: data: URI 'data:image/webp;base64,AAAAAAAAAAAAAAAAA…' is not one tinygltf decodes"));
     CHECK(webp.size() < 400);
 
-    // A .glb whose BIN chunk claims more than the file.
-    std::string bytes;
+}
+
+TEST_CASE("a .glb's layout is checked before it is read: the header, each chunk, the BIN chunk buffers[0] needs") {
+    temp_folder const dir("canopy_gltf_test");
+    // A valid .glb: one triangle, its buffer the BIN chunk.
+    gltf_builder b;
+    b.vec3s({0, 0, 0, 1, 0, 0, 0, 1, 0});
+    std::string const rest =
+        "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], \"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}]";
+    std::string const document = b.document("{\"byteLength\": " + std::to_string(b.bin.size()) + "}", rest);
+    write_glb(dir.path / "good.glb", document, b.bin);
+    std::string good;
+    for (unsigned char c : read_bytes(dir.path / "good.glb")) good += char(c);
+    REQUIRE(good.size() > 40);
+    auto const set_u32 = [](std::string bytes, std::size_t at, std::uint32_t v) {
+        for (std::size_t k = 0; k < 4; ++k) bytes[at + k] = char((v >> (8 * k)) & 0xFF);
+        return bytes;
+    };
+    std::size_t const json_chunk = 12 + 8 + std::size_t(std::uint8_t(good[12])) + 256 * std::size_t(std::uint8_t(good[13]));
+    std::string const size = std::to_string(good.size());
+    // A chunk of a type this loader does not know, after BIN: skipped, as glTF asks.
+    std::string extra = good + set_u32(std::string(4, '\0'), 0, 4) + "XTRA" + "abcd";
+    extra = set_u32(extra, 8, std::uint32_t(extra.size()));
     {
-        write_glb(dir.path / "cut.glb", json, g.bin);
-        std::ifstream in(dir.path / "cut.glb", std::ios::binary);
-        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+        write_text(dir.path / "extra.glb", extra);
+        canopy::scene s;
+        plugins().load(s, dir.path / "extra.glb");
+        REQUIRE(s.meshes().size() == 1);
+        CHECK(s.meshes()[0].triangles.size() == 1);
     }
-    std::size_t const bin_header = 20 + (bytes[12] & 0xFF) + ((bytes[13] & 0xFF) << 8);
-    bytes[bin_header + 3] = '\x10';
-    write_text(dir.path / "cut.glb", bytes);
-    CHECK_THAT(load_error(dir.path / "cut.glb"), Catch::Contains("cut.glb: not a valid .glb file: its BIN chunk of"));
+    std::string trailing = good + "abcd";
+    trailing = set_u32(trailing, 8, std::uint32_t(trailing.size()));
+    std::string const no_bin = good.substr(0, json_chunk);
+    std::string short_bin = no_bin + set_u32(std::string(4, '\0'), 0, 4) + std::string("BIN\0", 4) + good.substr(json_chunk + 8, 4);
+    short_bin = set_u32(short_bin, 8, std::uint32_t(short_bin.size()));
+    struct bad_case {
+        std::string name, bytes, message;
+    };
+    std::vector<bad_case> const cases = {
+        {"magic", "abcd" + good.substr(4), "GLB header: magic is 'abcd', expected 'glTF'"},
+        {"binary_magic", std::string("\x01\0'x", 4) + good.substr(4), "GLB header: magic is '\\x01\\x00\\x27x', expected 'glTF'"},
+        {"text", document, "GLB header: magic is '{\"as', expected 'glTF'"},
+        {"short", good.substr(0, 8), "GLB header: the file has 8 bytes, fewer than the header's 12"},
+        {"version", set_u32(good, 4, 1), "GLB header: version is 1, expected 2"},
+        {"long", set_u32(good, 8, 99999), "GLB header: length 99999 runs past the end of the file (" + size + " bytes)"},
+        {"longer_file", good + "abcd", "GLB header: length " + size + " ends before the end of the file (" +
+                                           std::to_string(good.size() + 4) + " bytes)"},
+        {"header_only", set_u32(good.substr(0, 12), 8, 12), "GLB header: no chunk follows the header (the JSON chunk is required)"},
+        {"json_length", set_u32(good, 12, 99999), "chunk 0: length 99999 runs past the end of the file (" + size + " bytes)"},
+        {"json_type", good.substr(0, 16) + "BIN" + good.substr(19),
+         "chunk 0: type is 'BINN', expected 'JSON' (the JSON chunk comes first)"},
+        {"json_unpadded", set_u32(good, 12, std::uint32_t(json_chunk - 20 - 1)),
+         "chunk 0: length " + std::to_string(json_chunk - 21) + " is not a multiple of 4 (chunks are padded)"},
+        {"bin_length", set_u32(good, json_chunk, 99999), "chunk 1: length 99999 runs past the end of the file (" + size + " bytes)"},
+        {"two_json", good.substr(0, json_chunk + 4) + "JSON" + good.substr(json_chunk + 8),
+         "chunk 1: a second JSON chunk (there is one, the first)"},
+        {"trailing", trailing, "chunk 2: its 8-byte header at byte " + size + " runs past the end of the file (" +
+                                   std::to_string(trailing.size()) + " bytes)"},
+        {"no_bin", set_u32(no_bin, 8, std::uint32_t(no_bin.size())), "buffers[0]: has no uri and the file has no BIN chunk"},
+        {"short_bin", short_bin, "buffers[0]: byteLength 36 is more than the 4 bytes of the BIN chunk"},
+    };
+    for (auto const& c : cases) {
+        INFO(c.name);
+        fs::path const file = dir.path / (c.name + ".glb");
+        write_text(file, c.bytes);
+        CHECK(load_error(file) == file.string() + ": " + c.message);
+    }
+    // Only a .glb's first buffer may go without a uri.
+    write_text(dir.path / "no_uri.gltf", document);
+    CHECK(load_error(dir.path / "no_uri.gltf") ==
+          (dir.path / "no_uri.gltf").string() +
+              ": buffers[0]: has no uri (only the first buffer of a .glb file, its BIN chunk, may go without)");
 }
 
 TEST_CASE("glTF images of the same bytes or file are decoded once, and alpha factors move the cutoff, not the texels") {
@@ -1024,6 +1080,52 @@ TEST_CASE("glTF images of the same bytes or file are decoded once, and alpha fac
     REQUIRE(shared.width == 4);
     CHECK(shared.texels[5].w == 1.0f);
     CHECK(shared.texels[10].w == 0.0f);
+}
+
+TEST_CASE("glTF images count against --max-total-texels: embedded ones from when they are decoded") {
+    temp_folder const dir("canopy_gltf_test");
+    limits_guard const guard;
+    write_mask_png(dir.path / "mask.png"); // 4 × 4
+    auto const png = read_bytes(dir.path / "mask.png");
+    gltf_builder b;
+    int const pos = b.vec3s({-1, -1, 0, 1, -1, 0, 1, 1, 0});
+    int const uv = b.vec2s({0, 1, 1, 1, 1, 0});
+    int const view = b.add_view(png.data(), png.size());
+    std::string primitives;
+    for (int m = 0; m < 2; ++m)
+        primitives += std::string(m ? ", " : "") + "{\"attributes\": {\"POSITION\": " + std::to_string(pos) +
+                      ", \"TEXCOORD_0\": " + std::to_string(uv) + "}, \"material\": " + std::to_string(m) + "}";
+    // Material 0 uses the file (read after the embedded image is decoded, before the scene holds
+    // it), material 1 the embedded image.
+    std::string const rest =
+        "\"meshes\": [{\"primitives\": [" + primitives + "]}], \"nodes\": [{\"mesh\": 0}], \"scenes\": [{\"nodes\": [0]}], "
+        "\"materials\": [{\"pbrMetallicRoughness\": {\"baseColorTexture\": {\"index\": 0}}}, "
+        "{\"pbrMetallicRoughness\": {\"baseColorTexture\": {\"index\": 1}}}], "
+        "\"textures\": [{\"source\": 0}, {\"source\": 1}], "
+        "\"images\": [{\"uri\": \"mask.png\"}, {\"bufferView\": " + std::to_string(view) + ", \"mimeType\": \"image/png\"}]";
+    fs::path const file = dir.path / "two.glb";
+    write_glb(file, b.document("{\"byteLength\": " + std::to_string(b.bin.size()) + "}", rest), b.bin);
+    auto const over = [](std::uint64_t held, std::uint64_t limit) {
+        return "image is 4 × 4 (16 texels): with the " + std::to_string(held) + " texels of the images loaded before it, " +
+               std::to_string(held + 16) + " texels in all exceed the limit of " + std::to_string(limit) +
+               " (--max-total-texels)";
+    };
+    canopy::default_limits().max_total_texels = 32;
+    {
+        canopy::scene s;
+        plugins().load(s, file);
+        CHECK(s.images().size() == 2);
+        CHECK(s.texels() == 32);
+        // Loaded again into the same scene: the embedded image is refused as it is decoded.
+        CHECK(test_support::message_of([&] { plugins().load(s, file); }) ==
+              file.string() + ": images[1]: embedded " + over(32, 32));
+        CHECK(s.texels() == 32);
+    }
+    canopy::default_limits().max_total_texels = 31;
+    CHECK(load_error(file) ==
+          file.string() + ": images[0]: 'mask.png': " + (dir.path / "mask.png").string() + ": " + over(16, 31));
+    canopy::default_limits().max_total_texels = 15;
+    CHECK(load_error(file) == file.string() + ": images[1]: embedded " + over(0, 15));
 }
 
 TEST_CASE("glTF meshes are held to --max-triangles together, before their accessors are read") {

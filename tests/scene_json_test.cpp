@@ -11,6 +11,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 #include <sys/stat.h>
@@ -29,6 +30,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using test_support::load_failure;
+using test_support::message_of;
+using test_support::limits_guard;
 using test_support::temp_folder;
 using canopy::vec3;
 
@@ -158,27 +161,201 @@ TEST_CASE("json: file meshes and textures load through the registry, relative to
     REQUIRE(s.images()[0].width == 2);
     CHECK(s.images()[0].texels[0].x == 1.0f);
     CHECK(s.images()[0].texels[1].w == 0.0f);
-    // Each file is loaded once per "meshes" entry; every mesh node places a copy of the file's
-    // group (named after the node), whose mesh nodes share the loaded meshes.
-    REQUIRE(s.meshes().size() == 2);
+    // Each file is loaded once (the two "meshes" entries name the same file and, by default or
+    // by name, the same loader); every mesh node is a group of its own (named after the node)
+    // whose one child is the file's node tree, shared.
+    REQUIRE(s.meshes().size() == 1);
     CHECK(s.meshes()[0].triangles.size() == 2);
     auto const& kids = s.at(group).children;
     REQUIRE(kids.size() == 3);
     CHECK(s.at(kids[0]).name == "quad");
     CHECK(s.at(kids[1]).name == "second");
     CHECK(s.at(kids[2]).name == "quad again");
-    std::uint32_t const expected_mesh[3] = {0, 0, 1};
+    REQUIRE(s.at(kids[0]).children.size() == 1);
+    canopy::node_id const shared = s.at(kids[0]).children[0];
+    CHECK(s.at(shared).name == "quad");
     for (std::size_t k = 0; k < 3; ++k) {
         CHECK(s.at(kids[k]).kind == canopy::node_kind::group);
         REQUIRE(s.at(kids[k]).children.size() == 1);
-        auto const& mesh_node = s.at(s.at(kids[k]).children[0]);
-        CHECK(mesh_node.kind == canopy::node_kind::mesh);
-        CHECK(mesh_node.mesh == expected_mesh[k]);
+        CHECK(s.at(kids[k]).children[0] == shared);
     }
+    REQUIRE(s.at(shared).children.size() == 1);
+    auto const& mesh_node = s.at(s.at(shared).children[0]);
+    CHECK(mesh_node.kind == canopy::node_kind::mesh);
+    CHECK(mesh_node.mesh == 0);
     auto const c = canopy::compile(s, {.plugins = &r});
-    CHECK(c.statistics.meshes_built == 2);
+    CHECK(c.statistics.meshes_built == 1);
     CHECK(c.statistics.placements == 3);
     CHECK(c.statistics.triangles_placed == 6);
+}
+
+TEST_CASE("json: a file placed by 10^5 mesh nodes is loaded once and shared: one node per reference") {
+    temp_folder const tmp("canopy_json_test");
+    tmp.write("quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
+    // 1000 transforms of 100 mesh nodes each, every one naming the file (through two "meshes"
+    // entries, one with the loader by name).
+    constexpr int rows = 1000, per_row = 100;
+    std::string text = R"({"meshes": [{"name": "q", "file": "quad.obj"}, {"name": "q2", "file": "./quad.obj", "loader": "obj"}], "nodes": [)";
+    for (int i = 0; i < rows; ++i) {
+        text += std::string(i ? ",\n" : "") + R"({"type": "transform", "translate": [)" + std::to_string(2 * (i % 40)) +
+                ", " + std::to_string(2 * (i / 40)) + R"(, 0], "children": [)";
+        for (int k = 0; k < per_row; ++k) text += std::string(k ? "," : "") + R"({"type": "mesh", "mesh": "q)" + (k % 2 ? "2" : "") + "\"}";
+        text += "]}";
+    }
+    text += "]}";
+    auto const r = json_registry();
+    canopy::scene s;
+    auto const before = s.nodes().size();
+    r.load(s, tmp.write("many.json", text));
+    // The file's group, the transforms, one group per reference, and the OBJ's nodes once: its
+    // holder, its group and its mesh node.
+    CHECK(s.nodes().size() == before + 1 + rows + rows * per_row + 3);
+    CHECK(s.meshes().size() == 1);
+    auto const c = canopy::compile(s, {.plugins = &r});
+    CHECK(c.levels == 1);
+    CHECK(c.statistics.meshes_built == 1);
+    CHECK(c.statistics.triangles_stored == 2);
+    CHECK(c.statistics.placements == std::size_t(rows * per_row));
+    REQUIRE(c.meshes.size() == 1);
+    CHECK(c.meshes[0].accel.primitive_count() == 2); // the quad's BVH, built once
+    CHECK(c.top1.primitive_count() == std::size_t(rows * per_row));
+}
+
+TEST_CASE("json: mesh files nested through scene files are loaded once each, placements multiply at compile time") {
+    temp_folder const tmp("canopy_json_test");
+    tmp.write("quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
+    // level0.json places quad.obj 10 times; level k places level k-1 10 times (and quad.obj once).
+    auto const level = [&](int k) {
+        std::string const inner = k == 0 ? "quad.obj" : "level" + std::to_string(k - 1) + ".json";
+        std::string text = R"({"meshes": [{"name": "in", "file": ")" + inner + R"("}, {"name": "q", "file": "quad.obj"}], "nodes": [{"type": "mesh", "mesh": "q"})";
+        for (int i = 0; i < 10; ++i)
+            text += R"(, {"type": "transform", "translate": [0, 0, )" + std::to_string(i) + R"(], "children": [{"type": "mesh", "mesh": "in"}]})";
+        return tmp.write("level" + std::to_string(k) + ".json", text + "]}");
+    };
+    for (int k = 0; k < 7; ++k) level(k);
+    auto const r = json_registry();
+    {
+        canopy::scene s;
+        auto const before = s.nodes().size();
+        r.load(s, tmp.path / "level3.json");
+        CHECK(s.meshes().size() == 1);
+        // Per scene file: its group, 10 transforms, 11 groups of references; quad.obj's 3 nodes
+        // once; each nested scene file's holder once.
+        CHECK(s.nodes().size() == before + 4 * 22 + 3 + 3);
+        auto const c = canopy::compile(s, {.plugins = &r});
+        // 10^4 through the nest, and quad.obj placed directly at each level: 1 + 10 + 100 + 1000.
+        CHECK(c.statistics.placements == 10000 + 1111);
+        CHECK(c.statistics.meshes_built == 1);
+    }
+    {
+        // 10^7 placements: a few hundred nodes, refused by compile() before it makes any.
+        canopy::scene s;
+        r.load(s, tmp.path / "level6.json");
+        CHECK(s.nodes().size() < 200);
+        CHECK(message_of([&] { (void)canopy::compile(s, {.plugins = &r, .name = "level6.json"}); }) ==
+              "level6.json: 11111111 meshes, instances, cameras and lights at the top level exceed the limit of " +
+                  std::to_string(canopy::default_limits().max_placements) + " (--max-placements)");
+    }
+    {
+        // A load that fails after loading files leaves nothing shared behind: the next load into
+        // the same scene loads them again.
+        canopy::scene s;
+        auto const broken = tmp.write("broken.json", R"({"meshes": [{"name": "in", "file": "level0.json"}], "nodes": [
+          {"type": "mesh", "mesh": "in"}, {"type": "mesh", "mesh": "missing"}]})");
+        CHECK(message_of([&] { r.load(s, broken); }) == broken.string() + ": nodes[1]: mesh 'missing' is not defined");
+        CHECK(s.nodes().size() == 1);
+        CHECK(s.meshes().empty());
+        r.load(s, tmp.path / "level1.json");
+        CHECK(s.meshes().size() == 1);
+        CHECK(canopy::compile(s, {.plugins = &r}).statistics.placements == 100 + 11);
+    }
+}
+
+TEST_CASE("json: shared file meshes trace the same hits as the same scene written inline") {
+    temp_folder const tmp("canopy_json_test");
+    // Two meshes (usemtl splits them): a unit square at z = 0 and a triangle at z = 0.5.
+    tmp.write("two.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 0.5\nv 1 0 0.5\nv 0 1 0.5\n"
+                         "usemtl a\nf 1 2 3\nf 1 3 4\nusemtl b\nf 5 6 7\n");
+    tmp.write("inner.json", R"({"meshes": [{"name": "m", "file": "two.obj"}], "nodes": [
+      {"type": "transform", "translate": [2, 0, -1], "children": [{"type": "mesh", "mesh": "m"}]},
+      {"type": "transform", "translate": [0, 0, -1], "scale": 0.5, "children": [{"type": "mesh", "mesh": "m"}]}]})");
+    auto const shared = tmp.write("shared.json", R"({"meshes": [{"name": "m", "file": "two.obj"}, {"name": "inner", "file": "inner.json"}], "nodes": [
+      {"type": "mesh", "mesh": "m"},
+      {"type": "transform", "translate": [2, 0, 0], "rotate": [30, 0, 0, 1], "children": [{"type": "mesh", "mesh": "m"}]},
+      {"type": "transform", "translate": [0, 2, 0], "children": [{"type": "mesh", "mesh": "inner"}]},
+      {"type": "transform", "translate": [2.5, 2.5, 0.25], "children": [{"type": "mesh", "mesh": "m"}]}]})");
+    // The same placements with the meshes written out where each reference is.
+    std::string const two = R"({"type": "group", "children": [{"type": "mesh", "mesh": "a"}, {"type": "mesh", "mesh": "b"}]})";
+    auto const inline_file = tmp.write("inline.json", R"({"meshes": [
+      {"name": "a", "positions": [0,0,0, 1,0,0, 1,1,0, 0,1,0], "indices": [0,1,2, 0,2,3]},
+      {"name": "b", "positions": [0,0,0.5, 1,0,0.5, 0,1,0.5], "indices": [0,1,2]}], "nodes": [)" + two + R"(,
+      {"type": "transform", "translate": [2, 0, 0], "rotate": [30, 0, 0, 1], "children": [)" + two + R"(]},
+      {"type": "transform", "translate": [0, 2, 0], "children": [{"type": "group", "children": [
+        {"type": "transform", "translate": [2, 0, -1], "children": [)" + two + R"(]},
+        {"type": "transform", "translate": [0, 0, -1], "scale": 0.5, "children": [)" + two + R"(]}]}]},
+      {"type": "transform", "translate": [2.5, 2.5, 0.25], "children": [)" + two + R"(]}]})");
+    auto const r = json_registry();
+    canopy::scene a, b;
+    r.load(a, shared);
+    r.load(b, inline_file);
+    CHECK(a.meshes().size() == 2); // two.obj once, for both scene files
+    auto const ca = canopy::compile(a, {.plugins = &r});
+    auto const cb = canopy::compile(b, {.plugins = &r});
+    REQUIRE(ca.statistics.placements == 10);
+    REQUIRE(cb.statistics.placements == 10);
+    CHECK(ca.levels == cb.levels);
+    canopy::default_intersector isect;
+    int hits = 0;
+    for (int i = 0; i <= 60; ++i)
+        for (int k = 0; k <= 60; ++k) {
+            vec3<float> const origin{-0.5f + 0.075f * float(i), -0.5f + 0.075f * float(k), 5.0f};
+            canopy::ray const ray{origin, 0.0f, {0.01f, 0.02f, -1.0f}, INFINITY};
+            auto const ha = ca.closest_hit(ray, isect), hb = cb.closest_hit(ray, isect);
+            INFO("ray " << i << ", " << k);
+            REQUIRE(ha.hit == hb.hit);
+            if (!ha.hit) continue;
+            ++hits;
+            CHECK(ha.t == hb.t);
+            CHECK(ha.u == hb.u);
+            CHECK(ha.v == hb.v);
+            CHECK(ha.prim_id == hb.prim_id);
+            CHECK(ha.geom_id == hb.geom_id);
+            CHECK(ha.inst_id == hb.inst_id);
+        }
+    CHECK(hits > 600);
+}
+
+TEST_CASE("json: textures count against --max-total-texels together, a texture named twice is loaded once") {
+    temp_folder const tmp("canopy_json_test");
+    limits_guard const guard;
+    canopy::rgba_image img;
+    img.width = img.height = 4;
+    img.pixels.assign(64, 1.0f);
+    for (char const* name : {"a.png", "b.png", "c.png"}) canopy::write_image(tmp.path / name, img);
+    auto const file = tmp.write("textures.json", R"({"materials": [{"name": "a", "texture": "a.png"},
+      {"name": "a again", "texture": "./a.png"}, {"name": "b", "texture": "b.png"}, {"name": "c", "texture": "c.png"}]})");
+    auto const r = json_registry();
+    canopy::default_limits().max_total_texels = 48;
+    canopy::scene s;
+    r.load(s, file);
+    CHECK(s.images().size() == 3);
+    CHECK(s.texels() == 48);
+    CHECK(s.materials()[1].image == s.materials()[0].image);
+    canopy::default_limits().max_total_texels = 47;
+    auto const f = load_failure(r, file);
+    CHECK(f.where == "materials[3].texture");
+    CHECK(f.problem == (tmp.path / "c.png").string() +
+                           ": image is 4 × 4 (16 texels): with the 32 texels of the images loaded before it, 48 texels "
+                           "in all exceed the limit of 47 (--max-total-texels)");
+    // The images the scene holds already count: a second file loaded into the same scene.
+    canopy::default_limits().max_total_texels = 60;
+    canopy::scene two;
+    r.load(two, tmp.write("one.json", R"({"materials": [{"name": "a", "texture": "a.png"}]})"));
+    CHECK(message_of([&] { r.load(two, file); }) ==
+          file.string() + ": materials[3].texture: " + (tmp.path / "c.png").string() +
+              ": image is 4 × 4 (16 texels): with the 48 texels of the images loaded before it, 64 texels in all exceed "
+              "the limit of 60 (--max-total-texels)");
+    CHECK(two.texels() == 16);
 }
 
 TEST_CASE("json: instances target prototypes by name, ids default to the count of instances before them") {
@@ -439,26 +616,13 @@ TEST_CASE("json: only regular files are read: the scene, its mesh files and its 
     temp_folder const tmp("canopy_json_test");
     auto const& dir = tmp.path;
     auto const r = json_registry();
-    fs::create_directory(dir / "folder.json");
-    fs::create_directory(dir / "folder.obj");
-    fs::create_directory(dir / "folder.png");
-    fs::create_symlink("/dev/zero", dir / "zero.json");
-    fs::create_symlink("/dev/zero", dir / "zero.obj");
-    fs::create_symlink("/dev/zero", dir / "zero.png");
-    REQUIRE(::mkfifo((dir / "fifo.json").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.png").c_str(), 0600) == 0);
-    struct bad_case {
-        std::string name;
-        char const* kind;
-    };
-    for (auto const& [name, kind] : {bad_case{"folder", "a folder"}, bad_case{"zero", "a character device"},
-                                     bad_case{"fifo", "a FIFO"}}) {
+    REQUIRE(test_support::make_special_files(dir, {".json", ".obj", ".png"}));
+    for (auto const& [name, kind] : test_support::special_files()) {
         INFO(name);
         auto const scene = load_failure(r, dir / (name + ".json"));
         CHECK(scene.file == (dir / (name + ".json")).string());
         CHECK(scene.where == "");
-        CHECK(scene.problem == std::string("is ") + kind + ", not a regular file");
+        CHECK(scene.problem == "is " + kind + ", not a regular file");
 
         auto const mesh = load_failure(r, tmp.write("mesh_" + name + ".json",
                                                     R"({"meshes": [{"name": "m", "file": ")" + name + R"(.obj"}]})"));

@@ -61,22 +61,6 @@ xf64 widen(xf const& a) {
             vec3<double>(a.translation)};
 }
 
-// Möller–Trumbore in double.
-std::optional<double> hit_double(canopy::ray const& r, std::array<vec3<double>, 3> const& v) {
-    vec3<double> const o(r.origin), d(r.direction);
-    vec3<double> const e1 = v[1] - v[0], e2 = v[2] - v[0];
-    vec3<double> const p = cross(d, e2);
-    double const det = dot(e1, p);
-    if (std::abs(det) < 1e-300) return std::nullopt;
-    vec3<double> const s = o - v[0];
-    double const u = dot(s, p) / det;
-    vec3<double> const q = cross(s, e1);
-    double const w = dot(d, q) / det;
-    double const t = dot(e2, q) / det;
-    if (u < 0 || w < 0 || u + w > 1 || t < double(r.tmin) || t > double(r.tmax)) return std::nullopt;
-    return t;
-}
-
 // The closest hit of a levels-1 scene, by brute force over every placement and triangle: the
 // placement index, or nullopt.
 std::optional<std::uint32_t> brute_force_placement(canopy::compiled_scene const& c, canopy::ray const& r, double& best) {
@@ -87,10 +71,24 @@ std::optional<std::uint32_t> brute_force_placement(canopy::compiled_scene const&
         for (auto const& t : c.meshes[c.top_meshes[k].index].triangles) {
             std::array<vec3<double>, 3> const v{m.transform_point(vec3<double>(t.v0)), m.transform_point(vec3<double>(t.v1)),
                                                 m.transform_point(vec3<double>(t.v2))};
-            if (auto h = hit_double(r, v); h && *h < best) best = *h, found = k;
+            if (auto h = test_support::hit_double(r, v); h && *h < best) best = *h, found = k;
         }
     }
     return found;
+}
+
+// The closest hit of `r` in a levels-1 scene: the brute-force closest placement, at the same t
+// (to 1e-5). Returns the hit for the caller's own checks.
+canopy::basic_hit_record<float> check_closest_placement(canopy::compiled_scene const& c, canopy::ray const& r) {
+    double t = 0.0;
+    auto const expected = brute_force_placement(c, r, t);
+    canopy::default_intersector isect;
+    auto const hit = c.closest_hit(r, isect);
+    REQUIRE(expected.has_value());
+    REQUIRE(hit.hit);
+    CHECK(hit.inst_id == *expected);
+    CHECK(double(hit.t) == Approx(t).epsilon(1e-5));
+    return hit;
 }
 
 // A JSON scene of prototypes p0 … p{n−1}, each an instance of the next (0.5 along x), the last
@@ -377,21 +375,13 @@ TEST_CASE("limits: one small mesh placed 10^6 times through instance nodes in on
     std::mt19937 rng(15);
     std::uniform_int_distribution<int> cell(0, side - 1);
     std::uniform_real_distribution<float> unit(-0.9f, 0.9f);
-    canopy::default_intersector isect;
     for (int i = 0; i < 6; ++i) {
         int const x = cell(rng), y = cell(rng);
         vec3<float> const aim{3.0f * float(x) + unit(rng), 3.0f * float(y) + unit(rng), 0.0f};
         vec3<float> const origin = aim + vec3<float>(5.0f * unit(rng), 5.0f * unit(rng), 10.0f);
-        canopy::ray const r{origin, 0.0f, aim - origin, INFINITY};
-        double t = 0.0;
-        auto const expected = brute_force_placement(c, r, t);
-        auto const hit = c.closest_hit(r, isect);
         INFO("ray " << i);
-        REQUIRE(expected.has_value());
-        REQUIRE(hit.hit);
-        CHECK(hit.inst_id == *expected);
-        CHECK(c.instance_id(hit) == *expected);
-        CHECK(double(hit.t) == Approx(t).epsilon(1e-5));
+        auto const hit = check_closest_placement(c, {origin, 0.0f, aim - origin, INFINITY});
+        CHECK(c.instance_id(hit) == hit.inst_id);
     }
 }
 
@@ -415,19 +405,12 @@ TEST_CASE("limits: a group of 10^5 mesh nodes compiles to 10^5 placements") {
     std::mt19937 rng(16);
     std::uniform_int_distribution<int> pick(0, count - 1);
     std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
-    canopy::default_intersector isect;
     for (int i = 0; i < 6; ++i) {
         int const k = pick(rng);
         vec3<float> const aim{float(k % 400) * 2.0f + 0.25f, float(k / 400) * 2.0f + 0.25f, 0.0f};
         vec3<float> const origin = aim + vec3<float>(3.0f * unit(rng), 3.0f * unit(rng), 8.0f);
-        canopy::ray const r{origin, 0.0f, aim - origin, INFINITY};
-        double t = 0.0;
-        auto const expected = brute_force_placement(c, r, t);
-        auto const hit = c.closest_hit(r, isect);
         INFO("ray " << i);
-        REQUIRE(expected.has_value());
-        REQUIRE(hit.hit);
-        CHECK(hit.inst_id == *expected);
+        auto const hit = check_closest_placement(c, {origin, 0.0f, aim - origin, INFINITY});
         CHECK(c.top_meshes[hit.inst_id].index == hit.geom_id);
         CHECK(c.meshes[hit.geom_id].name == "tri" + std::to_string(k));
     }

@@ -8,9 +8,11 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -31,6 +33,7 @@ namespace {
 namespace fs = std::filesystem;
 using test_support::load_failure;
 using test_support::temp_folder;
+using test_support::limits_guard;
 using namespace std::string_literals;
 using canopy::vec2;
 using canopy::vec3;
@@ -590,27 +593,14 @@ TEST_CASE("obj: only regular files are read: the OBJ, its material libraries and
     auto const& dir = tmp.path;
     auto const r = obj_registry();
     std::string const tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n";
-    fs::create_directory(dir / "folder.obj");
-    fs::create_directory(dir / "folder.mtl");
-    fs::create_directory(dir / "folder.png");
-    fs::create_symlink("/dev/zero", dir / "zero.obj");
-    fs::create_symlink("/dev/zero", dir / "zero.mtl");
-    fs::create_symlink("/dev/zero", dir / "zero.png");
-    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.mtl").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.png").c_str(), 0600) == 0);
-    struct bad_case {
-        std::string name;
-        char const* kind;
-    };
-    for (auto const& [name, kind] : {bad_case{"folder", "a folder"}, bad_case{"zero", "a character device"},
-                                     bad_case{"fifo", "a FIFO"}}) {
+    REQUIRE(test_support::make_special_files(dir, {".obj", ".mtl", ".png"}));
+    for (auto const& [name, kind] : test_support::special_files()) {
         INFO(name);
         // The .obj itself (the registry checks it before its extension).
         auto const obj = load_failure(r, dir / (name + ".obj"));
         CHECK(obj.file == (dir / (name + ".obj")).string());
         CHECK(obj.where == "");
-        CHECK(obj.problem == std::string("is ") + kind + ", not a regular file");
+        CHECK(obj.problem == "is " + kind + ", not a regular file");
         // A material library: named with the .obj line asking for it.
         auto const lib = load_failure(r, tmp.write("lib_" + name + ".obj", "mtllib " + name + ".mtl\n" + tri));
         CHECK(lib.file == (dir / ("lib_" + name + ".obj")).string());
@@ -749,4 +739,30 @@ TEST_CASE("obj: a library named again and again is read once, materials naming t
         CHECK(s.materials()[std::size_t(i)].image == (i % 2 ? -1 : 0));
         CHECK(s.materials()[std::size_t(i)].alpha == (i % 2 ? canopy::alpha_mode::opaque : canopy::alpha_mode::mask));
     }
+}
+
+TEST_CASE("obj: textures count against --max-total-texels, a material's colour and alpha images together") {
+    temp_folder const tmp("canopy_obj_test");
+    limits_guard const guard;
+    auto const r = obj_registry();
+    std::vector<std::array<float, 4>> const texels(4, {1, 1, 1, 1});
+    write_png(tmp.path / "colour.png", 2, 2, texels);
+    write_png(tmp.path / "alpha.png", 2, 2, texels);
+    write_png(tmp.path / "other.png", 2, 2, texels);
+    tmp.write("lib.mtl", "newmtl a\nmap_Kd colour.png\nmap_d alpha.png\nnewmtl b\nmap_Kd other.png\n");
+    auto const file = tmp.write("two.obj", "mtllib lib.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 2 3\n");
+    // a holds one image of 4 texels (its alpha merged in), but both were decoded: 8 at the most,
+    // then b's 4.
+    canopy::default_limits().max_total_texels = 8;
+    canopy::scene s;
+    r.load(s, file);
+    CHECK(s.images().size() == 2);
+    CHECK(s.texels() == 8);
+    canopy::default_limits().max_total_texels = 7;
+    auto const f = load_failure(r, file);
+    CHECK(f.where == "3");
+    CHECK(f.problem == "texture 'alpha.png': " + (tmp.path / "alpha.png").string() +
+                           ": image is 2 × 2 (4 texels): with the 4 texels of the images loaded before it, 8 texels in "
+                           "all exceed the limit of 7 (--max-total-texels)");
+    CHECK(f.file == (tmp.path / "lib.mtl").string());
 }

@@ -19,6 +19,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -38,6 +39,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using test_support::temp_folder;
+using test_support::limits_guard;
 using canopy::vec2;
 using canopy::vec3;
 
@@ -589,10 +591,9 @@ TEST_CASE("OM files written by OpenMesh load with their normals and texture coor
 
     // Cut short after its header: OpenMesh's reader fails, or reads fewer faces than declared.
     std::string const om = read_file(tmp.path / "pyramid.om");
-    tmp.write("cut.om", om.substr(0, 40));
-    require_error(tmp.path / "cut.om", "the header declares 5 vertices, 5 faces and 8 edges, more than the file's 40 bytes hold");
-    tmp.write("cut.om", om.substr(0, om.size() - 20));
-    require_error(tmp.path / "cut.om", "5 of 5 faces were dropped");
+    require_error(tmp.write("cut.om", om.substr(0, 40)),
+                  "the header declares 5 vertices, 5 faces and 8 edges, more than the file's 40 bytes hold");
+    require_error(tmp.write("cut.om", om.substr(0, om.size() - 20)), "5 of 5 faces were dropped");
 }
 
 TEST_CASE("OBJ through the openmesh plugin keeps per-corner texture coordinates and normals") {
@@ -627,87 +628,74 @@ TEST_CASE("missing, empty and truncated files are errors naming the file") {
         tmp.write(name, "");
         require_error(tmp.path / name, "empty");
     }
-    tmp.write("blank.off", "  \n\n");
-    require_error(tmp.path / "blank.off", "empty");
+    require_error(tmp.write("blank.off", "  \n\n"), "empty");
 
     std::string const ply = pyramid::ply_binary(false);
-    tmp.write("cut.ply", ply.substr(0, ply.size() - 7));
-    require_error(tmp.path / "cut.ply", "element 'face' declares 5 entries of at least 13 bytes");
-    tmp.write("cut_vertices.ply", ply.substr(0, ply.find("end_header") + 11 + 40));
-    require_error(tmp.path / "cut_vertices.ply", "element 'vertex' declares 5 entries of at least 32 bytes");
+    require_error(tmp.write("cut.ply", ply.substr(0, ply.size() - 7)),
+                  "element 'face' declares 5 entries of at least 13 bytes");
+    require_error(tmp.write("cut_vertices.ply", ply.substr(0, ply.find("end_header") + 11 + 40)),
+                  "element 'vertex' declares 5 entries of at least 32 bytes");
     tmp.write("cut_list.ply", ply.substr(0, ply.size() - 2)); // within the last face's indices
     require_error(tmp.path / "cut_list.ply", "file ends in face 4 of 5");
 
     std::string const stl = read_file("/usr/share/assimp/models/STL/Spider_binary.stl");
-    tmp.write("cut.stl", stl.substr(0, stl.size() - 30));
-    require_error(tmp.path / "cut.stl", "truncated");
-    tmp.write("short.stl", stl.substr(0, 40));
-    require_error(tmp.path / "short.stl", "too short");
+    require_error(tmp.write("cut.stl", stl.substr(0, stl.size() - 30)), "truncated");
+    require_error(tmp.write("short.stl", stl.substr(0, 40)), "too short");
 
     std::string const off = pyramid::off();
-    tmp.write("cut.off", off.substr(0, off.rfind("3 3 0 4")));
-    require_error(tmp.path / "cut.off", "file ends after 4 of 5 faces");
-    tmp.write("cut.om", "OM");
-    require_error(tmp.path / "cut.om", "header");
+    require_error(tmp.write("cut.off", off.substr(0, off.rfind("3 3 0 4"))), "file ends after 4 of 5 faces");
+    require_error(tmp.write("cut.om", "OM"), "header");
 }
 
 TEST_CASE("NaN and infinite coordinates are errors naming the file and the place") {
     temp_folder const tmp("canopy_openmesh_test");
-    tmp.write("nan.off", "OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n");
-    require_error(tmp.path / "nan.off", "nan.off:4: vertex 1: coordinate 'nan' is not a finite number");
-    tmp.write("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n");
-    require_error(tmp.path / "inf.obj", "inf.obj:3: vertex coordinate 'inf' is not a finite number");
-    tmp.write("huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1 1e999\nf 1 2 3\n");
-    require_error(tmp.path / "huge.obj", "huge.obj:3: vertex coordinate '1e999' overflows a float");
+    require_error(tmp.write("nan.off", "OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n"),
+                  "nan.off:4: vertex 1: coordinate 'nan' is not a finite number");
+    require_error(tmp.write("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n"),
+                  "inf.obj:3: vertex coordinate 'inf' is not a finite number");
+    require_error(tmp.write("huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1 1e999\nf 1 2 3\n"),
+                  "huge.obj:3: vertex coordinate '1e999' overflows a float");
     std::string ascii = pyramid::ply_ascii();
     ascii.replace(ascii.find("end_header\n") + 11, 1, "-inf");
-    tmp.write("inf.ply", ascii);
-    require_error(tmp.path / "inf.ply", "vertex 0: coordinate x = '-inf' is not finite");
+    require_error(tmp.write("inf.ply", ascii), "vertex 0: coordinate x = '-inf' is not finite");
 
     std::string binary = pyramid::ply_binary(false);
     float const nan = std::numeric_limits<float>::quiet_NaN();
     std::memcpy(binary.data() + binary.find("end_header\n") + 11 + 32 + 8, &nan, 4); // vertex 1, z
-    tmp.write("nan.ply", binary);
-    require_error(tmp.path / "nan.ply", "vertex 1: coordinate z");
+    require_error(tmp.write("nan.ply", binary), "vertex 1: coordinate z");
 
-    tmp.write("nan.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 NaN\n"
-                                     "vertex 0 1 0\nendloop\nendfacet\nendsolid x\n");
-    require_error(tmp.path / "nan.stl", "nan.stl:5: coordinate 'NaN' is not a finite number");
+    require_error(tmp.write("nan.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 NaN\n"
+                                       "vertex 0 1 0\nendloop\nendfacet\nendsolid x\n"),
+                  "nan.stl:5: coordinate 'NaN' is not a finite number");
     std::string stl(80, ' ');
     pyramid::put(stl, std::uint32_t(1), false);
     for (float v : {0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, std::numeric_limits<float>::infinity(), 0.0f})
         pyramid::put(stl, v, false);
     pyramid::put(stl, std::uint16_t(0), false);
-    tmp.write("inf.stl", stl);
-    require_error(tmp.path / "inf.stl", "triangle 0: corner 2 has a coordinate that is not finite");
+    require_error(tmp.write("inf.stl", stl), "triangle 0: corner 2 has a coordinate that is not finite");
 }
 
 TEST_CASE("vertex indices out of range and faces of fewer than three corners are errors") {
     temp_folder const tmp("canopy_openmesh_test");
-    tmp.write("range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
-    require_error(tmp.path / "range.off", "range.off:6: face 0: vertex index 3 is out of range (3 vertices)");
-    tmp.write("negative.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n");
-    require_error(tmp.path / "negative.off", "vertex index -1 is out of range");
-    tmp.write("two.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n");
-    require_error(tmp.path / "two.off", "face 0 has 2 corners");
-    tmp.write("counts.off", "OFF 3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
-    require_error(tmp.path / "counts.off", "counts from the next line");
+    require_error(tmp.write("range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"),
+                  "range.off:6: face 0: vertex index 3 is out of range (3 vertices)");
+    require_error(tmp.write("negative.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n"),
+                  "vertex index -1 is out of range");
+    require_error(tmp.write("two.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n"), "face 0 has 2 corners");
+    require_error(tmp.write("counts.off", "OFF 3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"), "counts from the next line");
 
     std::string ascii = pyramid::ply_ascii();
     ascii.replace(ascii.rfind("3 3 0 4"), 7, "3 3 0 5");
-    tmp.write("range.ply", ascii);
-    require_error(tmp.path / "range.ply", "face 4: vertex index '5' is out of range (5 vertices)");
+    require_error(tmp.write("range.ply", ascii), "face 4: vertex index '5' is out of range (5 vertices)");
     std::string binary = pyramid::ply_binary(true);
     binary.replace(binary.size() - 4, 4, std::string("\0\0\0\7", 4)); // the last index, big-endian 7
-    tmp.write("range_big.ply", binary);
-    require_error(tmp.path / "range_big.ply", "face 4: vertex index 7 is out of range (5 vertices)");
+    require_error(tmp.write("range_big.ply", binary), "face 4: vertex index 7 is out of range (5 vertices)");
 
-    tmp.write("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n");
-    require_error(tmp.path / "range.obj", "range.obj:5: vertex index 4 is out of range");
-    tmp.write("uv_range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n");
-    require_error(tmp.path / "uv_range.obj", "texture coordinate index 2 is out of range");
-    tmp.write("line.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
-    require_error(tmp.path / "line.obj", "line.obj:3: face has 2 corners");
+    require_error(tmp.write("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n"),
+                  "range.obj:5: vertex index 4 is out of range");
+    require_error(tmp.write("uv_range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n"),
+                  "texture coordinate index 2 is out of range");
+    require_error(tmp.write("line.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n"), "line.obj:3: face has 2 corners");
 }
 
 TEST_CASE("odd files of assimp-testmodels: invalid OFF is an error, a point cloud is a mesh without triangles") {
@@ -755,12 +743,6 @@ TEST_CASE("the openmesh plugin registers its extensions and keeps OpenMesh's mes
 
 namespace {
 
-// Restores canopy::default_limits() when it goes.
-struct limits_guard {
-    canopy::resource_limits saved = canopy::default_limits();
-    ~limits_guard() { canopy::default_limits() = saved; }
-};
-
 std::string triangle_ply(std::string const& format, std::string const& x_type, std::string const& body) {
     return "ply\nformat " + format + " 1.0\nelement vertex 3\nproperty " + x_type + " x\nproperty " + x_type +
            " y\nproperty " + x_type + " z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n" + body;
@@ -782,22 +764,22 @@ TEST_CASE("PLY values OpenMesh's stream cannot read are refused with the value, 
     temp_folder const tmp("canopy_openmesh_test");
     // A double that overflows a float: OpenMesh reads coordinates as floats, its stream fails and
     // every later read fails while its loops go on (the face loop then grows a vector without end).
-    tmp.write("double.ply", triangle_ply("ascii", "double", "1e300 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
-    require_error(tmp.path / "double.ply", "double.ply:10: vertex 0: coordinate x = '1e300' overflows a float");
-    tmp.write("normal.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-                            "property float nx\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n"
-                            "0 0 0 1\n1 0 0 -3.5e38\n0 1 0 0\n");
-    require_error(tmp.path / "normal.ply", "normal.ply:12: vertex 1: nx = '-3.5e38' overflows a float");
-    tmp.write("nan.ply", triangle_ply("ascii", "float", "0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n"));
-    require_error(tmp.path / "nan.ply", "nan.ply:11: vertex 1: coordinate y = 'nan' is not finite");
-    tmp.write("index.ply", triangle_ply("ascii", "float", "0 0 0\n1 0 0\n0 1 0\n3 0 1.0 2\n"));
-    require_error(tmp.path / "index.ply", "index.ply:13: face 0: vertex_indices = '1.0' is not an integer");
+    require_error(tmp.write("double.ply", triangle_ply("ascii", "double", "1e300 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")),
+                  "double.ply:10: vertex 0: coordinate x = '1e300' overflows a float");
+    require_error(tmp.write("normal.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                                          "property float nx\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n"
+                                          "0 0 0 1\n1 0 0 -3.5e38\n0 1 0 0\n"),
+                  "normal.ply:12: vertex 1: nx = '-3.5e38' overflows a float");
+    require_error(tmp.write("nan.ply", triangle_ply("ascii", "float", "0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")),
+                  "nan.ply:11: vertex 1: coordinate y = 'nan' is not finite");
+    require_error(tmp.write("index.ply", triangle_ply("ascii", "float", "0 0 0\n1 0 0\n0 1 0\n3 0 1.0 2\n")),
+                  "index.ply:13: face 0: vertex_indices = '1.0' is not an integer");
     std::string binary = triangle_ply("binary_little_endian", "double", "");
     for (double v : {1e300, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0}) pyramid::put(binary, v, false);
     binary += '\3';
     for (std::int32_t i : {0, 1, 2}) pyramid::put(binary, i, false);
-    tmp.write("double_binary.ply", binary);
-    require_error(tmp.path / "double_binary.ply", "double_binary.ply: vertex 0: coordinate x = 1e+300 overflows a float");
+    require_error(tmp.write("double_binary.ply", binary),
+                  "double_binary.ply: vertex 0: coordinate x = 1e+300 overflows a float");
 
     // Too small for a float is no error: the stream reads 0, as here.
     tmp.write("tiny.ply", triangle_ply("ascii", "float", "1e-50 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
@@ -813,19 +795,19 @@ TEST_CASE("PLY counts are checked against OpenMesh's integers, the file's size a
     std::string const rest = "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
     // A count OpenMesh's header reader (an unsigned int from a stream) cannot hold: it would loop
     // on its header for ever.
-    tmp.write("wide.ply", header + "4294967296" + rest);
-    require_error(tmp.path / "wide.ply", "wide.ply:3: element 'vertex': count 4294967296 is more than OpenMesh reads (2^32 - 1)");
+    require_error(tmp.write("wide.ply", header + "4294967296" + rest),
+                  "wide.ply:3: element 'vertex': count 4294967296 is more than OpenMesh reads (2^32 - 1)");
     // More vertices than the file holds: refused before OpenMesh reserves for them.
-    tmp.write("short.ply", header + "100000000" + rest + std::string(36, '\0'));
-    require_error(tmp.path / "short.ply", "short.ply: element 'vertex' declares 100000000 entries of at least 12 bytes, "
-                                          "more than the 36 bytes after the header hold");
-    tmp.write("text.ply", "ply\nformat ascii 1.0\nelement vertex 2000000\nproperty float x\nproperty float y\n"
-                          "property float z\nend_header\n0 0 0\n");
-    require_error(tmp.path / "text.ply", "element 'vertex' declares 2000000 entries of at least 3 values");
+    require_error(tmp.write("short.ply", header + "100000000" + rest + std::string(36, '\0')),
+                  "short.ply: element 'vertex' declares 100000000 entries of at least 12 bytes, "
+                  "more than the 36 bytes after the header hold");
+    require_error(tmp.write("text.ply", "ply\nformat ascii 1.0\nelement vertex 2000000\nproperty float x\nproperty float y\n"
+                                        "property float z\nend_header\n0 0 0\n"),
+                  "element 'vertex' declares 2000000 entries of at least 3 values");
     limits_guard const guard;
     canopy::default_limits().max_triangles = 4;
-    tmp.write("many.ply", header + "5" + rest + std::string(60, '\0'));
-    require_error(tmp.path / "many.ply", "many.ply: 5 vertices exceed the limit of 4 (--max-triangles)");
+    require_error(tmp.write("many.ply", header + "5" + rest + std::string(60, '\0')),
+                  "many.ply: 5 vertices exceed the limit of 4 (--max-triangles)");
 }
 
 TEST_CASE("PLY layouts OpenMesh misreads are refused, naming what it would do") {
@@ -852,36 +834,36 @@ TEST_CASE("PLY layouts OpenMesh misreads are refused, naming what it would do") 
     require_error(tmp.path / "texcoord.ply",
                   "texcoord.ply: face property 'texcoord': OpenMesh reads no list property other than the face's vertex_indices");
     // Binary coordinates of an integer type: OpenMesh reads none of their bytes.
-    tmp.write("int.ply", triangle_ply("binary_little_endian", "int", std::string(49, '\0')));
-    require_error(tmp.path / "int.ply", "vertex property 'x' of type 'int' is not read by OpenMesh from binary files");
+    require_error(tmp.write("int.ply", triangle_ply("binary_little_endian", "int", std::string(49, '\0'))),
+                  "vertex property 'x' of type 'int' is not read by OpenMesh from binary files");
     std::string uint_count = triangle_ply("ascii", "float", "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
     uint_count.replace(uint_count.find("list uchar"), 10, "list uint");
-    tmp.write("count.ply", uint_count);
-    require_error(tmp.path / "count.ply", "count.ply:8: list 'vertex_indices': count type 'uint' is not one OpenMesh reads");
-    tmp.write("format.ply", "ply\ncomment first\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n");
-    require_error(tmp.path / "format.ply", "format.ply:2: the line after 'ply' must be 'format <type> <version>'");
-    tmp.write("no_end.ply", "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\ncomment end_header\n");
-    require_error(tmp.path / "no_end.ply", "no_end.ply: PLY header has no end_header line");
+    require_error(tmp.write("count.ply", uint_count),
+                  "count.ply:8: list 'vertex_indices': count type 'uint' is not one OpenMesh reads");
+    require_error(tmp.write("format.ply", "ply\ncomment first\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n"),
+                  "format.ply:2: the line after 'ply' must be 'format <type> <version>'");
+    require_error(tmp.write("no_end.ply", "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\ncomment end_header\n"),
+                  "no_end.ply: PLY header has no end_header line");
 }
 
 TEST_CASE("OFF BINARY is checked like ASCII OFF: counts against the file and the limit, values, indices") {
     temp_folder const tmp("canopy_openmesh_test");
     std::vector<float> const triangle{0, 0, 0, 1, 0, 0, 0, 1, 0};
     // Counts of 2·10^9: OpenMesh would reserve for them and loop reading past the end.
-    tmp.write("huge.off", off_binary("OFF BINARY", 2000000000u, 2000000000u, triangle, {3, 0, 1, 2}));
-    require_error(tmp.path / "huge.off", "huge.off: 2000000000 vertices exceed the limit of 268435456 (--max-triangles)");
-    tmp.write("short.off", off_binary("OFF BINARY", 1000, 1, triangle, {3, 0, 1, 2}));
-    require_error(tmp.path / "short.off", "short.off: the header declares 1000 vertices of 12 bytes, more than the 52 bytes after it hold");
-    tmp.write("faces.off", off_binary("OFF BINARY", 3, 1000, triangle, {3, 0, 1, 2}));
-    require_error(tmp.path / "faces.off", "faces.off: the header declares 1000 faces of at least 16 bytes, more than the 16 bytes");
-    tmp.write("range.off", off_binary("OFF BINARY", 3, 1, triangle, {3, 0, 7, 2}));
-    require_error(tmp.path / "range.off", "range.off: face 0: vertex index 7 is out of range (3 vertices)");
-    tmp.write("corners.off", off_binary("OFF BINARY", 3, 1, triangle, {2, 0, 1, 2}));
-    require_error(tmp.path / "corners.off", "corners.off: face 0: has 2 corners (at least 3 needed)");
+    require_error(tmp.write("huge.off", off_binary("OFF BINARY", 2000000000u, 2000000000u, triangle, {3, 0, 1, 2})),
+                  "huge.off: 2000000000 vertices exceed the limit of 268435456 (--max-triangles)");
+    require_error(tmp.write("short.off", off_binary("OFF BINARY", 1000, 1, triangle, {3, 0, 1, 2})),
+                  "short.off: the header declares 1000 vertices of 12 bytes, more than the 52 bytes after it hold");
+    require_error(tmp.write("faces.off", off_binary("OFF BINARY", 3, 1000, triangle, {3, 0, 1, 2})),
+                  "faces.off: the header declares 1000 faces of at least 16 bytes, more than the 16 bytes");
+    require_error(tmp.write("range.off", off_binary("OFF BINARY", 3, 1, triangle, {3, 0, 7, 2})),
+                  "range.off: face 0: vertex index 7 is out of range (3 vertices)");
+    require_error(tmp.write("corners.off", off_binary("OFF BINARY", 3, 1, triangle, {2, 0, 1, 2})),
+                  "corners.off: face 0: has 2 corners (at least 3 needed)");
     std::vector<float> with_nan = triangle;
     with_nan[4] = std::numeric_limits<float>::quiet_NaN();
-    tmp.write("nan.off", off_binary("OFF BINARY", 3, 1, with_nan, {3, 0, 1, 2}));
-    require_error(tmp.path / "nan.off", "nan.off: vertex 1: position has a value that is not finite");
+    require_error(tmp.write("nan.off", off_binary("OFF BINARY", 3, 1, with_nan, {3, 0, 1, 2})),
+                  "nan.off: vertex 1: position has a value that is not finite");
 
     // A good one, with normals: positions, normals and the face as written.
     std::vector<float> values;
@@ -899,17 +881,17 @@ TEST_CASE("OFF BINARY is checked like ASCII OFF: counts against the file and the
 
 TEST_CASE("ASCII OFF: values beyond a float and counts beyond OpenMesh's are refused, normals, uvs and colours read") {
     temp_folder const tmp("canopy_openmesh_test");
-    tmp.write("huge.off", "OFF\n3 1 0\n0 0 0\n1 1e300 0\n0 1 0\n3 0 1 2\n");
-    require_error(tmp.path / "huge.off", "huge.off:4: vertex 1: coordinate '1e300' overflows a float");
-    tmp.write("wide.off", "OFF\n4294967296 1 0\n");
-    require_error(tmp.path / "wide.off", "wide.off:2: OFF count 4294967296 is more than OpenMesh reads (2^32 - 1)");
-    tmp.write("uv.off", "STOFF\n3 1 0\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1e39\n3 0 1 2\n");
-    require_error(tmp.path / "uv.off", "uv.off:5: vertex 2: texture coordinate '1e39' overflows a float");
+    require_error(tmp.write("huge.off", "OFF\n3 1 0\n0 0 0\n1 1e300 0\n0 1 0\n3 0 1 2\n"),
+                  "huge.off:4: vertex 1: coordinate '1e300' overflows a float");
+    require_error(tmp.write("wide.off", "OFF\n4294967296 1 0\n"),
+                  "wide.off:2: OFF count 4294967296 is more than OpenMesh reads (2^32 - 1)");
+    require_error(tmp.write("uv.off", "STOFF\n3 1 0\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1e39\n3 0 1 2\n"),
+                  "uv.off:5: vertex 2: texture coordinate '1e39' overflows a float");
     {
         limits_guard const guard;
         canopy::default_limits().max_triangles = 2;
-        tmp.write("many.off", "OFF\n3 3 0\n");
-        require_error(tmp.path / "many.off", "many.off:2: 3 vertices exceed the limit of 2 (--max-triangles)");
+        require_error(tmp.write("many.off", "OFF\n3 3 0\n"),
+                      "many.off:2: 3 vertices exceed the limit of 2 (--max-triangles)");
     }
 
     // NOFF after a binary NOFF (OpenMesh's reader keeps a file's flags), STOFF with a COFF colour,
@@ -969,10 +951,10 @@ TEST_CASE("ASCII PLY: a value left over on an entry's line is named, not read as
     temp_folder const tmp("canopy_openmesh_test");
     std::string const header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                                "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
-    tmp.write("extra_vertex.ply", header + "0 0 0 9\n1 0 0\n0 1 0\n3 0 1 2\n");
-    require_error(tmp.path / "extra_vertex.ply", "extra_vertex.ply:10: vertex 0: more values on its line than its properties take (next: '9')");
-    tmp.write("extra_face.ply", header + "0 0 0\n1 0 0\n0 1 0\n3 0 1 2 7 \r\n");
-    require_error(tmp.path / "extra_face.ply", "extra_face.ply:13: face 0: more values on its line than its properties take (next: '7')");
+    require_error(tmp.write("extra_vertex.ply", header + "0 0 0 9\n1 0 0\n0 1 0\n3 0 1 2\n"),
+                  "extra_vertex.ply:10: vertex 0: more values on its line than its properties take (next: '9')");
+    require_error(tmp.write("extra_face.ply", header + "0 0 0\n1 0 0\n0 1 0\n3 0 1 2 7 \r\n"),
+                  "extra_face.ply:13: face 0: more values on its line than its properties take (next: '7')");
     // Trailing blanks and CRLF line ends are fine.
     tmp.write("crlf.ply", header + "0 0 0 \r\n1 0 0\t\r\n0 1 0\r\n3 0 1 2\r\n");
     canopy::scene s;
@@ -981,29 +963,28 @@ TEST_CASE("ASCII PLY: a value left over on an entry's line is named, not read as
 
 TEST_CASE("STL, OBJ and OM: values beyond a float, the lines OpenMesh reads, counts against the limit and the file") {
     temp_folder const tmp("canopy_openmesh_test");
-    tmp.write("huge.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 1e39\nvertex 0 1 0\n"
-                          "endloop\nendfacet\nendsolid x\n");
-    require_error(tmp.path / "huge.stl", "huge.stl:5: coordinate '1e39' overflows a float");
-    tmp.write("loop.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\nendsolid x\n");
-    require_error(tmp.path / "loop.stl", "loop.stl:6: facet 0: expected 'vertex x y z'");
-    tmp.write("uv.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 1e39\nf 1/1 2/1 3/1\n");
-    require_error(tmp.path / "uv.obj", "uv.obj:4: texture coordinate value '1e39' overflows a float");
+    require_error(tmp.write("huge.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 1e39\nvertex 0 1 0\n"
+                                        "endloop\nendfacet\nendsolid x\n"),
+                  "huge.stl:5: coordinate '1e39' overflows a float");
+    require_error(tmp.write("loop.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\nendsolid x\n"),
+                  "loop.stl:6: facet 0: expected 'vertex x y z'");
+    require_error(tmp.write("uv.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 1e39\nf 1/1 2/1 3/1\n"),
+                  "uv.obj:4: texture coordinate value '1e39' overflows a float");
     {
         limits_guard const guard;
         canopy::default_limits().max_triangles = 1;
         std::string stl(80, ' ');
         pyramid::put(stl, std::uint32_t(2), false);
         stl += std::string(100, '\0');
-        tmp.write("two.stl", stl);
-        require_error(tmp.path / "two.stl", "two.stl: 6 vertices exceed the limit of 1 (--max-triangles)");
+        require_error(tmp.write("two.stl", stl), "two.stl: 6 vertices exceed the limit of 1 (--max-triangles)");
     }
     std::string om = "OM";
     om += 'T';
     om += char(2);
     for (std::uint32_t v : {100000000u, 1u, 3u}) pyramid::put(om, v, false);
     om += std::string(64, '\0');
-    tmp.write("big.om", om);
-    require_error(tmp.path / "big.om", "big.om: the header declares 100000000 vertices, 1 faces and 3 edges, more than the file's 80 bytes hold");
+    require_error(tmp.write("big.om", om),
+                  "big.om: the header declares 100000000 vertices, 1 faces and 3 edges, more than the file's 80 bytes hold");
 }
 
 TEST_CASE("a mesh file that is a device or a folder is refused before it is opened") {

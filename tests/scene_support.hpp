@@ -1,11 +1,38 @@
-// Helpers shared by the scene and plugin tests: catching the scene_error that bad input must give.
+// Helpers shared by the scene and plugin tests: catching the scene_error that bad input must give,
+// setting resource limits for one test, and a reference ray–triangle test.
 //
 // Include it after the test file's `import` lines (one of them must bring canopy.scene): it uses
-// <filesystem>, <string>, <string_view> and Catch2, which the test file includes before its
-// imports (standard headers may not follow an import).
+// <array>, <cmath>, <filesystem>, <optional>, <string>, <string_view> and Catch2, which the test
+// file includes before its imports (standard headers may not follow an import).
 #pragma once
 
 namespace test_support {
+
+// The distance t at which ray r hits the triangle v, in [tmin, tmax], or nullopt: Möller–Trumbore
+// in double, a reference for the library's float test (use rays aimed at triangle interiors, far
+// from edges, where both agree on whether there is a hit).
+inline std::optional<double> hit_double(canopy::ray const& r, std::array<canopy::vec3<double>, 3> const& v) {
+    using vec = canopy::vec3<double>;
+    vec const o(r.origin), d(r.direction);
+    vec const e1 = v[1] - v[0], e2 = v[2] - v[0];
+    vec const p = cross(d, e2);
+    double const det = dot(e1, p);
+    if (std::abs(det) < 1e-300) return std::nullopt;
+    vec const s = o - v[0];
+    double const u = dot(s, p) / det;
+    vec const q = cross(s, e1);
+    double const w = dot(d, q) / det;
+    double const t = dot(e2, q) / det;
+    if (u < 0 || w < 0 || u + w > 1 || t < double(r.tmin) || t > double(r.tmax)) return std::nullopt;
+    return t;
+}
+
+// Sets canopy::default_limits() back to what it was when the guard was made, when it goes: a
+// test that lowers a limit cannot leave it lowered for the next, whatever it throws.
+struct limits_guard {
+    canopy::resource_limits saved = canopy::default_limits();
+    ~limits_guard() { canopy::default_limits() = saved; }
+};
 
 // The scene_error that f throws. A failed check if it throws none (the error returned then says
 // "(no scene_error)"); any other exception propagates.

@@ -92,22 +92,6 @@ std::vector<world_triangle> world_of(canopy::compiled_scene const& c) {
     return out;
 }
 
-// Möller–Trumbore in double; rays in these tests aim at triangle interiors, far from edges.
-std::optional<double> hit_double(canopy::ray const& r, world_triangle const& w) {
-    vec3<double> const o(r.origin), d(r.direction);
-    vec3<double> const e1 = w.v[1] - w.v[0], e2 = w.v[2] - w.v[0];
-    vec3<double> const p = cross(d, e2);
-    double const det = dot(e1, p);
-    if (std::abs(det) < 1e-300) return std::nullopt;
-    vec3<double> const s = o - w.v[0];
-    double const u = dot(s, p) / det;
-    vec3<double> const q = cross(s, e1);
-    double const v = dot(d, q) / det;
-    double const t = dot(e2, q) / det;
-    if (u < 0 || v < 0 || u + v > 1 || t < double(r.tmin) || t > double(r.tmax)) return std::nullopt;
-    return t;
-}
-
 // Rays from outside the scene at the centroids of random world triangles: the compiled scene's
 // closest hit must be the brute-force closest (same mesh, triangle and placement ids, t close).
 void check_against_brute_force(canopy::compiled_scene const& c, int rays, std::uint32_t seed) {
@@ -126,7 +110,7 @@ void check_against_brute_force(canopy::compiled_scene const& c, int rays, std::u
         std::optional<double> best;
         world_triangle const* best_w = nullptr;
         for (auto const& w : world)
-            if (auto t = hit_double(r, w); t && (!best || *t < *best)) best = t, best_w = &w;
+            if (auto t = test_support::hit_double(r, w.v); t && (!best || *t < *best)) best = t, best_w = &w;
         canopy::default_intersector isect;
         auto const hr = c.closest_hit(r, isect);
         INFO("ray " << i);
@@ -536,20 +520,14 @@ TEST_CASE("the registry checks the file before its extension: folders, devices a
         ++calls;
         return s.add_group(parent);
     });
-    r.add_image_loader(".png", "test", [&](std::filesystem::path const&) {
+    r.add_image_loader(".png", "test", [&](std::filesystem::path const&, std::uint64_t) {
         ++calls;
         return canopy::image_data{};
     });
     test_support::temp_folder const tmp("canopy_scene_test");
     auto const& dir = tmp.path;
-    std::filesystem::create_directory(dir / "folder");
-    std::filesystem::create_directory(dir / "folder.tri");
-    std::filesystem::create_directory(dir / "folder.png");
-    std::filesystem::create_symlink("/dev/zero", dir / "zero.tri");
-    std::filesystem::create_symlink("/dev/zero", dir / "zero");
+    REQUIRE(test_support::make_special_files(dir, {"", ".tri", ".png"}));
     std::filesystem::create_symlink("zero.tri", dir / "link_to_link.tri");
-    REQUIRE(::mkfifo((dir / "fifo.tri").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.png").c_str(), 0600) == 0);
     canopy::scene s;
     auto const p = [&](char const* name) { return (dir / name).string(); };
     CHECK(message_of([&] { r.load(s, dir / "folder"); }) == p("folder") + ": is a folder, not a regular file");

@@ -257,21 +257,20 @@ TEST_CASE("an identity instance gives bit-identical results to no instance, at o
     require_no_failures(failures, "identity instances that change a result");
 }
 
-TEST_CASE("instances scaled by 2^k give the closest hit of a world-space brute force in double") {
-    random_source rng(1202);
+namespace {
+
+// Sixteen instances of one random mesh, instance i placed by place(i) with id first_id + i: the
+// closest hits of rays at the world's triangles are those of a world-space brute force in double.
+template <typename Place>
+void check_sixteen_instances(random_source& rng, std::uint32_t first_id, Place&& place) {
     auto const mesh = object_mesh(rng);
     mesh_bvh const b = canopy::build_binned_sah(mesh);
     std::vector<mesh_instance> instances;
     std::vector<world_triangle> world;
     for (std::uint32_t i = 0; i < 16; ++i) {
-        // Uniform 2^k, k in [-6, 6], or a different power of two per axis, k in [-4, 4].
-        int const k = rng.integer(-6, 6);
-        dvec3 const scale = i % 2 == 0 ? dvec3(std::ldexp(1.0, k))
-                                       : dvec3(std::ldexp(1.0, rng.integer(-4, 4)), std::ldexp(1.0, rng.integer(-4, 4)),
-                                               std::ldexp(1.0, rng.integer(-4, 4)));
-        transform const m = make_transform(no_rotation, scale, rng.point(-40.0f, 40.0f));
-        instances.emplace_back(b, m, 100 + i);
-        append_world(world, mesh, 100 + i, invalid, m, nullptr);
+        transform const m = place(i);
+        instances.emplace_back(b, m, first_id + i);
+        append_world(world, mesh, first_id + i, invalid, m, nullptr);
     }
     instance_bvh const top = canopy::build_binned_sah(instances);
     reference_comparison c;
@@ -279,23 +278,27 @@ TEST_CASE("instances scaled by 2^k give the closest hit of a world-space brute f
     require_agreement(c);
 }
 
+} // namespace
+
+TEST_CASE("instances scaled by 2^k give the closest hit of a world-space brute force in double") {
+    random_source rng(1202);
+    check_sixteen_instances(rng, 100, [&](std::uint32_t i) {
+        // Uniform 2^k, k in [-6, 6], or a different power of two per axis, k in [-4, 4].
+        int const k = rng.integer(-6, 6);
+        dvec3 const scale = i % 2 == 0 ? dvec3(std::ldexp(1.0, k))
+                                       : dvec3(std::ldexp(1.0, rng.integer(-4, 4)), std::ldexp(1.0, rng.integer(-4, 4)),
+                                               std::ldexp(1.0, rng.integer(-4, 4)));
+        return make_transform(no_rotation, scale, rng.point(-40.0f, 40.0f));
+    });
+}
+
 TEST_CASE("rotated and scaled instances give the closest hit of a world-space brute force in double") {
     random_source rng(1203);
-    auto const mesh = object_mesh(rng);
-    mesh_bvh const b = canopy::build_binned_sah(mesh);
-    std::vector<mesh_instance> instances;
-    std::vector<world_triangle> world;
-    for (std::uint32_t i = 0; i < 16; ++i) {
+    check_sixteen_instances(rng, 200, [&](std::uint32_t i) {
         double const s = rng.uniform_double(0.5, 2.0);
         dvec3 const scale = i % 2 == 0 ? dvec3(s) : dvec3(s, rng.uniform_double(0.5, 2.0), rng.uniform_double(0.5, 2.0));
-        transform const m = make_transform(random_rotation_rows(rng), scale, rng.point(-30.0f, 30.0f));
-        instances.emplace_back(b, m, 200 + i);
-        append_world(world, mesh, 200 + i, invalid, m, nullptr);
-    }
-    instance_bvh const top = canopy::build_binned_sah(instances);
-    reference_comparison c;
-    for (ray const& r : rays_at(rng, world, sized(1500, 20'000))) compare_with_world(r, closest(r, top), world, c);
-    require_agreement(c);
+        return make_transform(random_rotation_rows(rng), scale, rng.point(-30.0f, 30.0f));
+    });
 }
 
 TEST_CASE("two levels of rotated, scaled instances give the closest hit of a world-space brute force in double") {

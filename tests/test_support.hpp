@@ -1,16 +1,21 @@
-// Helpers shared by the test files that need no Canopy type: a temporary folder per test, and
-// running a shell command.
+// Helpers shared by the test files that need no Canopy type: a temporary folder per test, the
+// special files loaders must refuse, the message of an expected exception, and running a shell
+// command.
 //
 // Self-contained (standard headers only): include it with the test file's standard headers,
 // before its `import` lines.
 #pragma once
 
 #include <cstdio>
+#include <exception>
 #include <filesystem>
+#include <initializer_list>
 #include <fstream>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <vector>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -50,6 +55,47 @@ private:
         return count;
     }
 };
+
+// The kinds of file that are not regular files, as every reader must refuse them by name before
+// opening them: `name` is the stem make_special_files gives them, `kind` the words of the message
+// ("is a FIFO, not a regular file").
+struct special_file {
+    std::string name;
+    std::string kind;
+};
+
+inline std::vector<special_file> const& special_files() {
+    static std::vector<special_file> const all{{"folder", "a folder"}, {"zero", "a character device"}, {"fifo", "a FIFO"}};
+    return all;
+}
+
+// Makes in `folder`, for each extension (".obj"; "" for none), the folder "folder<ext>", the
+// symbolic link "zero<ext>" to /dev/zero and the FIFO "fifo<ext>". Returns false when one
+// cannot be made.
+inline bool make_special_files(std::filesystem::path const& folder, std::initializer_list<std::string_view> extensions) {
+    std::error_code ec;
+    for (std::string_view ext : extensions) {
+        std::filesystem::create_directory(folder / ("folder" + std::string(ext)), ec);
+        if (ec) return false;
+        std::filesystem::create_symlink("/dev/zero", folder / ("zero" + std::string(ext)), ec);
+        if (ec) return false;
+        if (::mkfifo((folder / ("fifo" + std::string(ext))).c_str(), 0600) != 0) return false;
+    }
+    return true;
+}
+
+// The message (what()) of the exception f throws when it is one of the types E..., or
+// "(no exception)" when f returns; an exception of another type propagates.
+template <typename... E>
+std::string what_of(auto&& f) {
+    try {
+        f();
+    } catch (std::exception const& e) {
+        if ((... || (dynamic_cast<E const*>(&e) != nullptr))) return e.what();
+        throw;
+    }
+    return "(no exception)";
+}
 
 // What a shell command did: its exit status (128 + the signal when a signal ended it; -1 when
 // it could not be started) and what it wrote to stdout and stderr.

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <limits>
+#include <optional>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -26,6 +27,8 @@ import canopy.texture;
 import canopy.scene;
 import canopy.image_io;
 import canopy.plugins.oiio;
+
+#include "scene_support.hpp"
 
 namespace {
 
@@ -445,12 +448,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using test_support::temp_folder;
-
-// Restores canopy::default_limits() when it goes.
-struct limits_guard {
-    canopy::resource_limits saved = canopy::default_limits();
-    ~limits_guard() { canopy::default_limits() = saved; }
-};
+using test_support::limits_guard;
 
 std::uint32_t crc32(std::string const& bytes) {
     std::uint32_t c = 0xFFFFFFFFu;
@@ -530,6 +528,58 @@ TEST_CASE("an image whose header claims more than --max-texels texels is refused
     canopy::default_limits().max_file_bytes = 20;
     CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "two.png"); }),
                Catch::Contains("two.png: is ") && Catch::Contains("bytes, over the limit of 20 bytes per file (--max-file-bytes)"));
+}
+
+TEST_CASE("the images of a scene share a texel budget (--max-total-texels), checked from each header before decoding") {
+    temp_folder const tmp("canopy_texture_test");
+    limits_guard const guard;
+    canopy::default_limits().max_total_texels = 10050;
+    canopy::registry r;
+    canopy::register_oiio_plugin(r);
+    // A header claiming 100 × 100 texels over a few bytes of data: decoding it would fail. The
+    // budget refuses it first, naming the texels held before it and the option.
+    fs::path const claim = tmp.write("claim.png", png_claiming(100, 100));
+    CHECK(problem_of([&] { (void)r.load_image(claim, 100); }) ==
+          claim.string() + ": image is 100 × 100 (10000 texels): with the 100 texels of the images loaded before it, "
+                           "10100 texels in all exceed the limit of 10050 (--max-total-texels)");
+    CHECK(problem_of([&] { (void)canopy::read_texture_image(claim, 51); }) ==
+          claim.string() + ": image is 100 × 100 (10000 texels): with the 51 texels of the images loaded before it, "
+                           "10051 texels in all exceed the limit of 10050 (--max-total-texels)");
+    // Within the budget, the header passes and decoding fails on the missing data.
+    CHECK_THAT(problem_of([&] { (void)r.load_image(claim, 50); }),
+               Catch::Contains(claim.string() + ": cannot read pixels") && !Catch::Contains("--max-total-texels"));
+    // Held texels beyond the budget refuse any image, and the sum never wraps.
+    CHECK_THAT(problem_of([&] { (void)r.load_image(claim, std::numeric_limits<std::uint64_t>::max()); }),
+               Catch::Contains("more than 2^64 texels in all exceed the limit of 10050 (--max-total-texels)"));
+
+    // A real 2 × 1 image: read up to the budget, refused one texel over it.
+    canopy::rgba_image two;
+    two.width = 2;
+    two.height = 1;
+    two.pixels = {1, 0, 0, 1, 0, 1, 0, 1};
+    canopy::write_image(tmp.path / "two.png", two);
+    CHECK(r.load_image(tmp.path / "two.png", 10048).texels.size() == 2);
+    CHECK(problem_of([&] { (void)r.load_image(tmp.path / "two.png", 10049); }) ==
+          (tmp.path / "two.png").string() + ": image is 2 × 1 (2 texels): with the 10049 texels of the images loaded "
+                                            "before it, 10051 texels in all exceed the limit of 10050 (--max-total-texels)");
+    // canopy.image_io's own limits, without the registry.
+    canopy::image_read_limits const limits{1 << 20, 1 << 20, 10, 9};
+    CHECK_THAT(problem_of([&] { (void)canopy::read_image(tmp.path / "two.png", limits); }),
+               Catch::Contains("11 texels in all exceed the limit of 10 (--max-total-texels)"));
+
+    // A loader that decodes without looking at the budget is held to it by the registry.
+    r.add_image_loader(".raw", "test", [](fs::path const& file, std::uint64_t) {
+        canopy::image_data img;
+        img.source = file.string();
+        img.width = img.height = 2;
+        img.texels.assign(4, {});
+        return img;
+    });
+    fs::path const raw = tmp.write("any.raw", "x");
+    CHECK(r.load_image(raw, 10046).texels.size() == 4);
+    CHECK(problem_of([&] { (void)r.load_image(raw, 10047); }) ==
+          raw.string() + ": image is 2 × 2 (4 texels): with the 10047 texels of the images loaded before it, 10051 "
+                         "texels in all exceed the limit of 10050 (--max-total-texels)");
 }
 
 TEST_CASE("GIF, WebP and BMP headers are checked before OpenImageIO opens them (it decodes them as it opens)") {

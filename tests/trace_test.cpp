@@ -381,14 +381,35 @@ TEST_CASE("canopy trace rejects a ray file whose size is not a multiple of 32, n
     CHECK(missing.output.find("none.rays") != std::string::npos);
 }
 
+namespace {
+
+struct bad_call {
+    std::vector<std::string> args;
+    std::string message;
+};
+
+// Each call exits with status 2, the message and the usage: the command's, or the program's
+// when no command is named.
+void check_usage_errors(std::vector<bad_call> const& calls) {
+    for (auto const& call : calls) {
+        std::string joined;
+        for (auto const& a : call.args) joined += a + " ";
+        INFO("canopy " << joined);
+        auto const result = run_canopy(call.args);
+        INFO(result.output);
+        CHECK(result.exit_code == 2);
+        CHECK_THAT(result.output, Catch::Contains(call.message));
+        bool const command = !call.args.empty() && (call.args[0] == "trace" || call.args[0] == "render" || call.args[0] == "info");
+        CHECK_THAT(result.output, Catch::Contains(command ? "usage: canopy " + call.args[0] : "usage: canopy"));
+    }
+}
+
+} // namespace
+
 TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") {
     temp_folder const folder("canopy_cli_test");
     std::string const out = (folder.path / "x.hits").string();
-    struct bad_call {
-        std::vector<std::string> args;
-        char const* usage;
-    };
-    std::vector<bad_call> const calls{
+    check_usage_errors({
         {{"trace", "--bogus", "1"}, "usage: canopy trace"},
         {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "nearest", "--out", out}, "usage: canopy trace"},
         {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "closest"}, "usage: canopy trace"},
@@ -401,16 +422,7 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
         {{"info"}, "usage: canopy info"},
         {{"paint"}, "usage: canopy"},
         {{}, "usage: canopy"},
-    };
-    for (auto const& call : calls) {
-        std::string joined;
-        for (auto const& a : call.args) joined += a + " ";
-        INFO("canopy " << joined);
-        auto const result = run_canopy(call.args);
-        INFO(result.output);
-        CHECK(result.exit_code == 2);
-        CHECK(result.output.find(call.usage) != std::string::npos);
-    }
+    });
     for (char const* command : {"trace", "render", "info"}) {
         INFO("canopy " << command << " --help");
         auto const result = run_canopy({command, "--help"});
@@ -423,6 +435,7 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
         for (std::string const& text :
              {"--max-file-bytes N  bytes of one input file (default " + std::to_string(defaults.max_file_bytes),
               std::string("--max-texels N"), "(default " + std::to_string(defaults.max_texels),
+              std::string("--max-total-texels N"), "(default " + std::to_string(defaults.max_total_texels) + " = 2^28",
               std::string("--max-triangles N"), "(default " + std::to_string(defaults.max_triangles),
               "--max-placements N  mesh placements after instances are flattened (default " +
                   std::to_string(defaults.max_placements) + " = 2^22)",
@@ -612,29 +625,6 @@ std::string scene_with(std::vector<json_quad> const& quads, std::string const& m
 // A horizontal square [-s, s]² at height y, facing up.
 json_quad floor_quad(std::string name, float s, float y, std::string material = {}) {
     return {std::move(name), std::move(material), {-s, y, -s, -s, y, s, s, y, s, s, y, -s}};
-}
-
-} // namespace
-
-namespace {
-
-struct bad_call {
-    std::vector<std::string> args;
-    std::string message;
-};
-
-// Each call exits with status 2, the message and the command's usage.
-void check_usage_errors(std::vector<bad_call> const& calls) {
-    for (auto const& call : calls) {
-        std::string joined;
-        for (auto const& a : call.args) joined += a + " ";
-        INFO("canopy " << joined);
-        auto const result = run_canopy(call.args);
-        INFO(result.output);
-        CHECK(result.exit_code == 2);
-        CHECK_THAT(result.output, Catch::Contains(call.message));
-        CHECK_THAT(result.output, Catch::Contains("usage: canopy " + call.args[0]));
-    }
 }
 
 } // namespace
@@ -1029,13 +1019,7 @@ TEST_CASE("the trace readers refuse what is not a scene or a ray file, naming th
     temp_folder const folder("canopy_cli_hostile_test");
     auto const& dir = folder.path;
     folder.write("tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    fs::create_directory(dir / "folder.obj");
-    fs::create_directory(dir / "folder.rays");
-    fs::create_symlink("/dev/zero", dir / "zero.obj");
-    fs::create_symlink("/dev/zero", dir / "zero.inst");
-    fs::create_symlink("/dev/zero", dir / "zero.rays");
-    REQUIRE(::mkfifo((dir / "fifo.obj").c_str(), 0600) == 0);
-    REQUIRE(::mkfifo((dir / "fifo.rays").c_str(), 0600) == 0);
+    REQUIRE(test_support::make_special_files(dir, {".obj", ".inst", ".rays"}));
     // Random bytes (a NUL planted at offset 12 of the first line), UTF-16 with and without its
     // byte-order mark, control bytes.
     std::string random(4096, '\0');
@@ -1059,14 +1043,7 @@ TEST_CASE("the trace readers refuse what is not a scene or a ray file, naming th
     folder.write("long.obj", "v 0 0 " + std::string(1 << 20, '7') + "x\n");
 
     auto const p = [&](char const* name) { return (dir / name).string(); };
-    auto const message = [](auto&& read) -> std::string {
-        try {
-            read();
-        } catch (canopy::format_error const& e) {
-            return e.what();
-        }
-        return "(no format_error)";
-    };
+    auto const message = [](auto&& read) { return test_support::what_of<canopy::format_error>(read); };
     struct bad_file {
         char const* name;
         std::string message;

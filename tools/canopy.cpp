@@ -7,8 +7,9 @@
 //   canopy trace --scene FILE --rays FILE --query closest|any --out FILE
 //                [--intersector none|alpha] [--threads N] [LIMITS]
 //   canopy info SCENE | --plugins [--plugin FILE]... [LIMITS]
-//   LIMITS: [--max-file-bytes N] [--max-texels N] [--max-triangles N] [--max-placements N]
-//           [--max-depth N]  (canopy::resource_limits, set before anything is loaded)
+//   LIMITS: [--max-file-bytes N] [--max-texels N] [--max-total-texels N] [--max-triangles N]
+//           [--max-placements N] [--max-depth N]  (canopy::resource_limits, set before anything
+//           is loaded)
 //
 // `canopy render` without a scene renders the built-in demo (instanced alpha-masked billboards)
 // into the four images of Figure 1 of the custom-intersector paper. With a scene, any file a
@@ -90,6 +91,9 @@ constexpr char const* limits_usage =
     "  --max-file-bytes N  bytes of one input file (default 4294967296 = 4 GiB)\n"
     "  --max-texels N      texels of one image, and pixels of a rendered image (default 67108864\n"
     "                      = 2^26, 1 GiB as float RGBA)\n"
+    "  --max-total-texels N\n"
+    "                      texels of all the scene's images together (default 268435456 = 2^28,\n"
+    "                      4 GiB as float RGBA)\n"
     "  --max-triangles N   triangles (and vertices) of the scene's meshes together, each mesh\n"
     "                      counted once (default 268435456 = 2^28)\n"
     "  --max-placements N  mesh placements after instances are flattened (default 4194304 = 2^22)\n"
@@ -159,7 +163,8 @@ struct option_spec {
 
 // Every command's limit options.
 constexpr option_spec limit_options[] = {
-    {"--max-file-bytes"}, {"--max-texels"}, {"--max-triangles"}, {"--max-placements"}, {"--max-depth"}};
+    {"--max-file-bytes"}, {"--max-texels"},     {"--max-total-texels"},
+    {"--max-triangles"},  {"--max-placements"}, {"--max-depth"}};
 
 struct arguments {
     std::map<std::string, std::vector<std::string>, std::less<>> options;
@@ -250,6 +255,7 @@ void apply_limits(arguments const& args) {
     std::uint64_t const most = std::numeric_limits<std::uint64_t>::max();
     if (args.has("--max-file-bytes")) limits.max_file_bytes = whole_option(args, "--max-file-bytes", 1, most);
     if (args.has("--max-texels")) limits.max_texels = whole_option(args, "--max-texels", 1, most);
+    if (args.has("--max-total-texels")) limits.max_total_texels = whole_option(args, "--max-total-texels", 1, most);
     if (args.has("--max-triangles")) limits.max_triangles = whole_option(args, "--max-triangles", 1, most);
     if (args.has("--max-placements")) limits.max_placements = whole_option(args, "--max-placements", 1, most);
     if (args.has("--max-depth")) limits.max_depth = whole_option(args, "--max-depth", 1, most);

@@ -7,6 +7,7 @@ module;
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <exception>
 #include <filesystem>
@@ -53,6 +54,9 @@ struct file_access {
     // Images that are another's bytes (the same buffer bytes, data: URI or file): not decoded
     // again, but shared (image index → the first image of those bytes).
     std::map<int, int> same_as;
+    // The texel budget (--max-total-texels): the texels of the scene's images before this file,
+    // and of the embedded images decoded so far.
+    std::uint64_t texels_held = 0, embedded_texels = 0;
 };
 
 // tinygltf's own path of a uri: dlib::urldecode ('+' is a space) joined to the base folder.
@@ -164,11 +168,13 @@ bool decode_embedded_image(tinygltf::Image* image, int index, std::string* err, 
     auto const dimensions = image_size(bytes, size < 0 ? 0 : std::size_t(size));
     if (!dimensions) return refuse("embedded image is neither PNG nor JPEG");
     auto const [w, h] = *dimensions;
-    std::uint64_t const texels = std::uint64_t(w) * h;
     if (w == 0 || h == 0) return refuse("embedded image has no pixels (" + std::to_string(w) + " × " + std::to_string(h) + ")");
-    if (texels > default_limits().max_texels || w > (1u << 24) || h > (1u << 24))
-        return refuse("embedded image is " + std::to_string(w) + " × " + std::to_string(h) + " (" + std::to_string(texels) +
-                      " texels), over the limit of " + std::to_string(default_limits().max_texels) + " texels (--max-texels)");
+    std::string problem = texel_problem(w, h, access.texels_held + access.embedded_texels, default_limits().max_texels,
+                                        default_limits().max_total_texels);
+    if (problem.empty() && (w > (1u << 24) || h > (1u << 24)))
+        problem = "image is " + std::to_string(w) + " × " + std::to_string(h) + ", over the 2^24 texels per side stb_image decodes";
+    if (!problem.empty()) return refuse("embedded " + problem);
+    access.embedded_texels += std::uint64_t(w) * h;
     try {
         return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, nullptr);
     } catch (std::bad_alloc const&) {
@@ -282,9 +288,9 @@ std::string index_name(char const* array, T i) {
 class converter {
 public:
     converter(tinygltf::Model const& model, fs::path const& file, scene& s, registry const& r,
-              std::map<int, int> const& same_as)
+              std::map<int, int> const& same_as, std::uint64_t embedded_texels)
         : model_(model), file_(file), name_(file.string()), s_(s), r_(r), same_as_(same_as),
-          materials_(model.materials.size()), meshes_(model.meshes.size()) {
+          materials_(model.materials.size()), meshes_(model.meshes.size()), embedded_pending_(embedded_texels) {
         for (auto const& m : s.meshes()) {
             held_vertices_ += m.positions.size();
             held_triangles_ += m.triangles.size();
@@ -806,6 +812,8 @@ private:
         } else {
             img = decoded_image(index);
         }
+        // An embedded image was counted when it was decoded: now the scene holds it.
+        if (index >= 0 && !file) embedded_pending_ -= std::min<std::uint64_t>(embedded_pending_, img.texels.size());
         std::string const where = index < 0 ? std::string("materials") : index_name("images", index);
         int const id = guarded(where, [&] { return s_.add_image(std::move(img)); });
         images_.emplace(key, id);
@@ -823,7 +831,7 @@ private:
                 fail(where, "data: URI " + shown(im.uri) + " is not one tinygltf decodes (PNG or JPEG, base64)");
             fs::path const path = file_.parent_path() / decode_uri(im.uri);
             try {
-                out = r_.load_image(path);
+                out = r_.load_image(path, s_.texels() + embedded_pending_);
             } catch (scene_error const& e) {
                 fail(where, shown(im.uri) + ": " + e.what());
             }
@@ -880,47 +888,113 @@ private:
     std::uint64_t placements_ = 0;                         // mesh nodes this file made
     std::map<std::pair<int, double>, int> images_;
     std::map<fs::path, int> image_files_;
+    std::uint64_t embedded_pending_; // texels of embedded images decoded, not yet in the scene
 };
 
-// The JSON chunk of a .glb file, after checking its layout (glTF 2.0, §4.4: a 12-byte header,
-// a JSON chunk, an optional BIN chunk, each chunk's 8-byte header included in the length).
-std::string_view glb_json(std::string_view bytes, std::string const& name) {
-    auto const u32 = [&](std::size_t i) {
+// The chunks of a .glb file that are read: the JSON chunk, and the BIN chunk when there is one.
+struct glb_chunks {
+    std::string_view json;
+    std::optional<std::string_view> bin;
+};
+
+// Four bytes of a header, quoted: printable ASCII as it is, other bytes as \xNN.
+std::string quoted_tag(std::string_view tag) {
+    std::string out = "'";
+    for (char const c : tag) {
+        auto const b = static_cast<unsigned char>(c);
+        if (b >= 0x20 && b < 0x7F && c != '\'' && c != '\\') {
+            out += c;
+        } else {
+            char hex[8];
+            std::snprintf(hex, sizeof hex, "\\x%02X", unsigned(b));
+            out += hex;
+        }
+    }
+    return out + "'";
+}
+
+// The layout of a .glb file, checked before anything else reads it (glTF 2.0, §4.4): a 12-byte
+// header (magic 'glTF', version 2, the length of the whole file), then chunks, each an 8-byte
+// header (length, type) and its data, inside the file: the JSON chunk first, a BIN chunk second
+// if there is one, chunks of other types after them (skipped, as the specification asks). Each
+// fault names the header or the chunk (counted from 0) and the sizes at stake, as
+//   "x.glb: GLB header: magic is 'abcd', expected 'glTF'"
+//   "x.glb: chunk 1: length 99999 runs past the end of the file (1234 bytes)"
+glb_chunks glb_layout(std::string_view bytes, std::string const& name) {
+    auto const u32 = [&](std::uint64_t i) {
         std::uint32_t v = 0;
         for (std::size_t k = 0; k < 4; ++k) v |= std::uint32_t(static_cast<unsigned char>(bytes[i + k])) << (8 * k);
         return std::uint64_t(v);
     };
-    auto const fail = [&](std::string const& problem) { throw scene_error(name, "", "not a valid .glb file: " + problem); };
-    if (bytes.size() < 20) fail("shorter than its 20-byte header");
-    if (u32(4) != 2) fail("container version " + std::to_string(u32(4)) + " (2 needed)");
-    std::uint64_t const length = u32(8), json_length = u32(12);
-    if (length > bytes.size())
-        fail("its header declares " + std::to_string(length) + " bytes, the file has " + std::to_string(bytes.size()));
-    if (bytes.substr(16, 4) != "JSON") fail("its first chunk is not JSON");
-    if (json_length == 0 || 20 + json_length > length)
-        fail("its JSON chunk of " + std::to_string(json_length) + " bytes does not fit in " + std::to_string(length) + " bytes");
-    std::uint64_t const bin = 20 + json_length;
-    if (bin < length) {
-        if (bin + 8 > length) fail("its BIN chunk header does not fit");
-        std::uint64_t const bin_length = u32(bin);
-        if (bytes.substr(bin + 4, 4) != std::string_view("BIN\0", 4)) fail("its second chunk is not BIN");
-        if (bin_length < 4 || bin_length % 4 != 0 || bin + 8 + bin_length > length)
-            fail("its BIN chunk of " + std::to_string(bin_length) + " bytes does not fit in " + std::to_string(length) + " bytes");
+    auto const fail = [&](std::string const& where, std::string const& problem) { throw scene_error(name, where, problem); };
+    std::uint64_t const size = bytes.size();
+    std::string const file_size = " (" + std::to_string(size) + " bytes)";
+    if (size < 12) fail("GLB header", "the file has " + std::to_string(size) + " bytes, fewer than the header's 12");
+    if (bytes.substr(0, 4) != "glTF") fail("GLB header", "magic is " + quoted_tag(bytes.substr(0, 4)) + ", expected 'glTF'");
+    if (u32(4) != 2) fail("GLB header", "version is " + std::to_string(u32(4)) + ", expected 2");
+    std::uint64_t const length = u32(8);
+    if (length > size) fail("GLB header", "length " + std::to_string(length) + " runs past the end of the file" + file_size);
+    if (length < size)
+        fail("GLB header", "length " + std::to_string(length) + " ends before the end of the file" + file_size);
+    if (length == 12) fail("GLB header", "no chunk follows the header (the JSON chunk is required)");
+    glb_chunks out;
+    std::uint64_t at = 12;
+    for (std::uint64_t k = 0; at < length; ++k) {
+        std::string const where = "chunk " + std::to_string(k);
+        if (length - at < 8)
+            fail(where, "its 8-byte header at byte " + std::to_string(at) + " runs past the end of the file" + file_size);
+        std::uint64_t const chunk = u32(at);
+        std::string_view const type = bytes.substr(std::size_t(at + 4), 4);
+        if (chunk > length - at - 8)
+            fail(where, "length " + std::to_string(chunk) + " runs past the end of the file" + file_size);
+        if (chunk % 4 != 0) fail(where, "length " + std::to_string(chunk) + " is not a multiple of 4 (chunks are padded)");
+        std::string_view const data = bytes.substr(std::size_t(at + 8), std::size_t(chunk));
+        if (k == 0) {
+            if (type != "JSON") fail(where, "type is " + quoted_tag(type) + ", expected 'JSON' (the JSON chunk comes first)");
+            if (chunk == 0) fail(where, "the JSON chunk is empty");
+            out.json = data;
+        } else if (type == "JSON") {
+            fail(where, "a second JSON chunk (there is one, the first)");
+        } else if (type == std::string_view("BIN\0", 4)) {
+            if (k != 1) fail(where, "a BIN chunk after chunk 1 (there is at most one, the second)");
+            out.bin = data;
+        }
+        at += 8 + chunk;
     }
-    return bytes.substr(20, json_length);
+    return out;
+}
+
+// Buffers without a uri: only a .glb file's buffers[0], which is its BIN chunk, may have none.
+void check_buffer_sources(gltf_schema::document_uris const& uris, std::optional<glb_chunks> const& glb,
+                          std::string const& name) {
+    for (std::size_t i = 0; i < uris.buffers.size(); ++i) {
+        if (!uris.buffers[i].empty()) continue;
+        std::string const where = "buffers[" + std::to_string(i) + "]";
+        if (!glb) throw scene_error(name, where, "has no uri (only the first buffer of a .glb file, its BIN chunk, may go without)");
+        if (i > 0) throw scene_error(name, where, "has no uri (only buffers[0] may go without: it is the BIN chunk)");
+        if (!glb->bin) throw scene_error(name, where, "has no uri and the file has no BIN chunk");
+        if (glb->bin->size() < uris.buffer_lengths[i])
+            throw scene_error(name, where, "byteLength " + std::to_string(uris.buffer_lengths[i]) + " is more than the " +
+                                               std::to_string(glb->bin->size()) + " bytes of the BIN chunk");
+    }
 }
 
 node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id parent, registry const& r) {
     std::string const name = file.string();
     if (bytes.size() > std::numeric_limits<unsigned int>::max())
         throw scene_error(name, "", "is " + std::to_string(bytes.size()) + " bytes, more than tinygltf reads (4 GiB)");
-    bool const binary = bytes.size() >= 4 && bytes.substr(0, 4) == "glTF";
-    std::string_view const json = binary ? glb_json(bytes, name) : bytes;
+    // A .glb file, or any file that starts as one, is read as one: its layout is checked first.
+    bool const binary = extension_of(file) == ".glb" || bytes.starts_with("glTF");
+    std::optional<glb_chunks> glb;
+    if (binary) glb = glb_layout(bytes, name);
+    std::string_view const json = binary ? glb->json : bytes;
     gltf_schema::document_uris const uris = gltf_schema::check_document(json, name, default_limits().max_depth);
+    check_buffer_sources(uris, glb, name);
 
     // The files tinygltf will ask for, as it names them.
     file_access access;
     access.base_dir = file.parent_path().string();
+    access.texels_held = s.texels();
     for (auto const& uri : uris.buffers)
         access.buffer_paths.push_back(uri.empty() || uri.starts_with("data:") ? "" : tinygltf_path(access.base_dir, uri));
     for (auto const& uri : uris.images)
@@ -978,7 +1052,7 @@ node_id parse(std::string_view bytes, fs::path const& file, scene& s, node_id pa
                           "glTF " + shown(model.asset.version) + " is not supported (this loader reads glTF 2.0)");
     scene::mark const mark = s.make_mark();
     try {
-        return converter(model, file, s, r, access.same_as).run(parent);
+        return converter(model, file, s, r, access.same_as, access.embedded_texels).run(parent);
     } catch (...) {
         s.roll_back(mark);
         throw;

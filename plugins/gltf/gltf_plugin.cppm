@@ -39,11 +39,15 @@
 // core schema is checked (its JSON type, its range or allowed values, the element an index refers
 // to, accessors and buffer views inside their buffer views and buffers, without overflow), so a
 // texture index of -1 or an object where an array belongs is refused with its JSON path, not
-// ignored. Also refused: malformed JSON or .glb layout, JSON nested deeper than --max-depth (at
+// ignored. A .glb file's layout is checked before anything reads it (glb_layout: the header's magic,
+// version and length, each chunk inside the file, JSON first, BIN second, a BIN chunk for a
+// buffers[0] without uri), each fault named as "GLB header", "chunk N" or "buffers[0]". Also
+// refused: malformed JSON, JSON nested deeper than --max-depth (at
 // most 512), missing buffers and images, files that are not regular files or are over
 // --max-file-bytes (external buffers and images included; a file is looked for in the glTF file's
 // folder only), embedded images that are not PNG or JPEG or whose header claims more than
-// --max-texels texels (checked before decoding), meshes over --max-triangles (the scene's meshes
+// --max-texels texels or would bring the scene's images over --max-total-texels together (checked
+// before decoding; embedded images count from when they are decoded), meshes over --max-triangles (the scene's meshes
 // together, checked before a primitive is read), mesh placements over --max-placements, indices out of
 // range, NaN or infinite values, values beyond the float range, unsupported modes and component
 // types, a node with two parents, a node that is its own descendant (the message lists the

@@ -75,6 +75,26 @@ affine_transform<float> to_affine(rows34 const& m) {
 // Files being loaded by this plugin on this thread (a scene referring to itself is refused).
 thread_local std::vector<std::string> files_in_progress;
 
+// A file's name for comparisons: canonical where it can be made so, else as given.
+std::string canonical_name(fs::path const& file) {
+    std::error_code ec;
+    auto const canonical = fs::weakly_canonical(file, ec);
+    return (ec ? file : canonical).string();
+}
+
+// The mesh files and textures loaded while one scene is loaded, nested scene files included: each
+// mesh file (with its loader) is loaded once, and every mesh node that places it shares its node
+// tree; each texture is loaded once, and every material naming it shares the image. So memory and
+// work stay linear in the distinct files however often, and however deeply nested, they are
+// referred to. Keyed by canonical file name (and loader); held by the outermost parse_json_scene
+// of a scene (active_files), on this thread.
+struct shared_files {
+    scene const* s = nullptr;
+    std::map<std::string, node_id> loaded;
+    std::map<std::string, int> images;
+};
+thread_local shared_files* active_files = nullptr;
+
 class builder {
 public:
     builder(std::string const& file, registry const* r, scene& s)
@@ -248,7 +268,7 @@ private:
             std::string const texture = string(*t, p);
             registry const& r = plugins(p, "a texture");
             fs::path const file = relative(texture, p);
-            m.image = at(p, [&] { return s_.add_image(r.load_image(file)); });
+            m.image = at(p, [&] { return shared_image(r, file); });
         } else if (m.alpha == alpha_mode::mask) {
             fail(at_key(path, "alphaMode"), "MASK needs a texture (its alpha is the mask)");
         }
@@ -269,8 +289,7 @@ private:
             if (json const* l = optional(e, "loader", path)) loader = string(*l, at_key(path, "loader"));
             registry const& r = plugins(p, "a mesh file");
             fs::path const mesh_file = relative(file, p);
-            node_id const holder = s_.add_group(no_node, "mesh '" + name + "'");
-            entry.loaded = at(p, [&] { return r.load(s_, mesh_file, holder, loader); });
+            entry.loaded = at(p, [&] { return shared_load(r, mesh_file, loader, name); });
         } else {
             check_keys(e, path, {"name", "positions", "indices", "uvs", "material"});
             mesh_data m;
@@ -415,25 +434,6 @@ private:
         return out;
     }
 
-    // Copies node `from` and its subtree under `parent` (a file mesh placed by a mesh node).
-    node_id clone(node_id from, node_id parent, int depth) {
-        if (depth > max_depth) fail("", "a mesh file's node tree is deeper than " + std::to_string(max_depth) + " levels");
-        canopy::node const n = s_.at(from);
-        node_id copy = no_node;
-        switch (n.kind) {
-        case node_kind::group: copy = s_.add_group(parent, n.name); break;
-        case node_kind::transform: copy = s_.add_transform(parent, n.transform, n.name); break;
-        case node_kind::mesh: copy = s_.add_mesh_node(parent, n.mesh, n.name); break;
-        case node_kind::instance: copy = s_.add_instance(parent, n.target, n.transform, n.instance_id, n.name); break;
-        case node_kind::camera: copy = s_.add_camera(parent, n.camera, n.name); break;
-        case node_kind::light: copy = s_.add_light(parent, n.light, n.name); break;
-        case node_kind::custom: copy = s_.add_custom(parent, n.custom_type, n.params, n.name); break;
-        }
-        s_.at(copy).source = n.source;
-        for (node_id k : n.children) clone(k, copy, depth + 1);
-        return copy;
-    }
-
     void node(json const& e, std::string const& path, node_id parent, int depth) {
         if (depth > max_depth) fail(path, "nodes are nested deeper than " + std::to_string(max_depth) + " levels");
         require_object(e, path);
@@ -458,8 +458,12 @@ private:
             if (it->second.loaded == no_node) {
                 made = at(path, [&] { return s_.add_mesh_node(parent, it->second.mesh, name.empty() ? mesh : name); });
             } else {
-                made = at(path, [&] { return clone(it->second.loaded, parent, depth); });
-                s_.at(made).name = name.empty() ? mesh : name;
+                // A group of the node's own, holding the file's node tree: shared, not copied.
+                made = at(path, [&] {
+                    node_id const g = s_.add_group(parent, name.empty() ? mesh : name);
+                    s_.attach(g, it->second.loaded);
+                    return g;
+                });
             }
         } else if (type == "instance") {
             check_keys(e, path, {"type", "name", "target", "id", "matrix", "translate", "rotate", "scale"});
@@ -517,6 +521,37 @@ private:
         if (made != no_node && s_.at(made).source.empty()) s_.at(made).source = file_;
     }
 
+    // The node tree of `file` as `loader` (empty: the extension's default) makes it, loaded once
+    // for the whole load (see shared_files): a later mesh entry naming the same file, in this
+    // scene file or in any file it loads, gets the same node.
+    node_id shared_load(registry const& r, fs::path const& file, std::string const& loader, std::string const& name) {
+        std::string plugin = loader;
+        if (plugin.empty()) {
+            std::string const ext = extension_of(file);
+            for (auto const& l : r.loaders())
+                if (l.name == ext) {
+                    plugin = l.plugin; // the default comes first
+                    break;
+                }
+        }
+        std::string const key = canonical_name(file) + '\0' + plugin;
+        if (auto it = shared_files_->loaded.find(key); it != shared_files_->loaded.end()) return it->second;
+        node_id const holder = s_.add_group(no_node, "mesh '" + name + "'");
+        node_id const loaded = r.load(s_, file, holder, loader);
+        shared_files_->loaded.emplace(key, loaded);
+        return loaded;
+    }
+
+    // The image of `file`, loaded once for the whole load (see shared_files), within the texel
+    // budget of the scene's images (--max-total-texels).
+    int shared_image(registry const& r, fs::path const& file) {
+        std::string const key = canonical_name(file);
+        if (auto it = shared_files_->images.find(key); it != shared_files_->images.end()) return it->second;
+        int const image = s_.add_image(r.load_image(file, s_.texels()));
+        shared_files_->images.emplace(key, image);
+        return image;
+    }
+
     struct mesh_entry {
         std::uint32_t mesh = 0;
         node_id loaded = no_node; // file meshes: the node the file's loader made (kept out of the tree)
@@ -530,31 +565,42 @@ private:
     std::map<std::string, mesh_entry> meshes_;
     std::map<std::string, node_id> prototypes_;
     std::uint32_t instances_ = 0;
+    shared_files* shared_files_ = active_files;
 };
 
 } // namespace
 
 node_id parse_json_scene(std::string_view text, std::string const& file_name, registry const* r, scene& s,
                          node_id parent) {
+    // The outermost load into `s` holds the shared files of every nested one.
+    shared_files own{&s, {}, {}};
+    shared_files* const outer = active_files;
+    if (outer == nullptr || outer->s != &s) active_files = &own;
     auto const mark = s.make_mark();
-    try {
-        return builder(file_name, r, s).run(text, parent);
-    } catch (scene_error const&) {
+    auto const fail = [&] {
         s.roll_back(mark);
+        std::erase_if(active_files->loaded, [&](auto const& e) { return e.second >= mark.nodes; });
+        std::erase_if(active_files->images, [&](auto const& e) { return std::size_t(e.second) >= mark.images; });
+        active_files = outer;
+    };
+    try {
+        node_id const n = builder(file_name, r, s).run(text, parent);
+        active_files = outer;
+        return n;
+    } catch (scene_error const&) {
+        fail();
         throw;
     } catch (json::exception const& e) {
-        s.roll_back(mark);
+        fail();
         throw scene_error(file_name, "", excerpt(e.what(), 200));
     } catch (...) {
-        s.roll_back(mark);
+        fail();
         throw;
     }
 }
 
 node_id load_json_scene(scene& s, std::filesystem::path const& file, node_id parent, registry const& r) {
-    std::error_code ec;
-    auto const canonical = fs::weakly_canonical(file, ec);
-    std::string const key = (ec ? file : canonical).string();
+    std::string const key = canonical_name(file);
     if (std::find(files_in_progress.begin(), files_in_progress.end(), key) != files_in_progress.end())
         throw scene_error(file.string(), "", "the scene refers to itself (through the files it loads)");
     std::string const content = read_regular_file(file);

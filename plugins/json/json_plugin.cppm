@@ -20,6 +20,14 @@
 // targets may form cycles in the file: the loader makes each prototype once and never follows
 // targets, compile() reports the cycle.
 //
+// Mesh files are loaded once per load: every (file, loader) pair, however many "meshes" entries
+// name it, in this file or in the scene files it loads, is loaded at its first mention, and each
+// mesh node placing it is a group of its own (named after the node, or the mesh) whose one child
+// is the file's node tree, shared (scene::attach). So nodes and memory grow by one node per
+// reference and linearly in the distinct files, however often and however deeply nested the
+// references; compile() builds each mesh once and counts the placements the references multiply
+// into against --max-placements before making any.
+//
 // Errors (scene_error) name the file and the JSON path of the element at fault, as
 //   "forest.json: nodes[3].children[1]: instance target 'oak' is not defined"
 //   "forest.json: materials[0].alphaCutoff: must be a number in [0, 1]"

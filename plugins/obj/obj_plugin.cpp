@@ -185,18 +185,20 @@ std::string texture_path(std::string_view line, std::vector<std::string_view> co
     return path;
 }
 
-// The material's texture: map_Kd, with map_d's red channel as alpha when given.
+// The material's texture: map_Kd, with map_d's red channel as alpha when given. texels_held: those
+// of the scene's images (the budget of --max-total-texels); the alpha image counts the colour's.
 std::optional<image_data> material_texture(mtl_material const& m, fs::path const& mtl_file, registry const& r,
-                                           bool& mask) {
+                                           std::uint64_t texels_held, bool& mask) {
     auto const load = [&](std::string const& relative, std::size_t line) {
         try {
-            return r.load_image(mtl_file.parent_path() / fs::path(relative));
+            return r.load_image(mtl_file.parent_path() / fs::path(relative), texels_held);
         } catch (scene_error const& e) {
             fail(mtl_file.string(), line, "texture '" + excerpt(relative) + "': " + e.what());
         }
     };
     std::optional<image_data> colour, alpha;
     if (!m.colour_texture.empty()) colour = load(m.colour_texture, m.colour_texture_line);
+    if (colour) texels_held += colour->texels.size();
     if (!m.alpha_texture.empty()) alpha = load(m.alpha_texture, m.alpha_texture_line);
     auto const valid = [&](image_data const& img, std::size_t line) {
         if (img.width <= 0 || img.height <= 0 || img.texels.size() != std::size_t(img.width) * std::size_t(img.height))
@@ -391,7 +393,7 @@ private:
             auto shared = images_.find(key);
             if (shared == images_.end()) {
                 bool mask = false;
-                std::optional<image_data> img = material_texture(m, library, *r_, mask);
+                std::optional<image_data> img = material_texture(m, library, *r_, s_.texels(), mask);
                 shared = images_.emplace(std::move(key), std::pair{img ? s_.add_image(std::move(*img)) : -1, mask}).first;
             }
             md.image = shared->second.first;

@@ -41,7 +41,8 @@
 // numbers, numbers that overflow a float ("value 1e300 overflows a float"), zero or out-of-range
 // indices, faces with fewer than 3 corners, corners of mixed forms, a missing, unreadable or
 // non-regular material library (named with the .obj line that asks for it), a texture that does
-// not load (named with its .mtl line), input that is not text ("not a text OBJ file: NUL byte at
+// not load (named with its .mtl line; over --max-texels, or over --max-total-texels with the
+// scene's images and the material's colour image), input that is not text ("not a text OBJ file: NUL byte at
 // offset 12", a UTF-16 byte-order mark), a file without faces (nothing to trace), vertices, texture
 // coordinates, normals or triangles over --max-triangles.
 module;

@@ -94,16 +94,14 @@ bool png_without_end(std::filesystem::path const& path, std::uint64_t size) {
 
 void check_texels(std::filesystem::path const& path, std::uint64_t width, std::uint64_t height,
                   image_read_limits const& limits) {
-    std::uint64_t const texels = width * height;
-    if (texels > limits.max_texels)
-        fail(path, "image is " + size_text(std::int64_t(width), std::int64_t(height)) + " (" + std::to_string(texels) +
-                       " texels), over the limit of " + std::to_string(limits.max_texels) + " texels (--max-texels)");
+    std::string const problem = texel_problem(width, height, limits.texels_held, limits.max_texels, limits.max_total_texels);
+    if (!problem.empty()) fail(path, problem);
 }
 
 } // namespace
 
 image_read_limits default_image_read_limits() {
-    return {default_limits().max_file_bytes, default_limits().max_texels};
+    return {default_limits().max_file_bytes, default_limits().max_texels, default_limits().max_total_texels, 0};
 }
 
 void read_image_into(std::filesystem::path const& path, image_read_limits const& limits,

@@ -13,8 +13,9 @@
 // /dev/zero, a FIFO or a folder is refused before it is opened), only by the reader of its
 // extension (a file that is not what its extension says is refused, not tried with every
 // format OpenImageIO knows), and only after its header: an image of more than max_texels texels
-// (width × height; --max-texels, canopy::default_limits() by default) is refused before any pixel
-// is decoded (GIF, WebP and BMP headers are read here, since OpenImageIO decodes those images as
+// (width × height; --max-texels, canopy::default_limits() by default), or one that would bring the
+// texels of a scene's images over max_total_texels (texels_held: those loaded before it;
+// --max-total-texels), is refused before any pixel is decoded (GIF, WebP and BMP headers are read here, since OpenImageIO decodes those images as
 // it opens them), as are images without pixels or channels, volumes and deep images.
 //
 // Failures throw image_error naming the file and the problem (missing file, unknown format,
@@ -46,8 +47,10 @@ private:
 
 // What read_image accepts; by default canopy::default_limits()'s values.
 struct image_read_limits {
-    std::uint64_t max_file_bytes; // bytes of the file (--max-file-bytes)
-    std::uint64_t max_texels;     // width × height (--max-texels)
+    std::uint64_t max_file_bytes;   // bytes of the file (--max-file-bytes)
+    std::uint64_t max_texels;       // width × height (--max-texels)
+    std::uint64_t max_total_texels; // texels_held + width × height (--max-total-texels)
+    std::uint64_t texels_held;      // of the images loaded before this one (0: none)
 };
 image_read_limits default_image_read_limits();
 
