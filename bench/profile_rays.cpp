@@ -2,6 +2,7 @@
 // callgrind counts instructions per ray (bench/profile.sh), perf samples where the time goes.
 //
 //   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]
+//                        [--quality fast|high]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow        QUERY  closest | any
 //
@@ -30,7 +31,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality fast|high]\n",
                  program);
     return 2;
 }
@@ -61,6 +62,7 @@ int main(int argc, char** argv) {
     bool quick = false, alpha = false, alpha_hook = false;
     std::size_t count = 0;
     int passes = 1;
+    canopy::build_quality quality = canopy::build_quality::fast;
     for (int i = 4; i < argc; ++i) {
         std::string const a = argv[i];
         if (a == "--quick") quick = true;
@@ -68,6 +70,9 @@ int main(int argc, char** argv) {
         else if (a == "--alpha-hook") alpha_hook = true;
         else if (a == "--count" && i + 1 < argc) count = std::size_t(std::atoll(argv[++i]));
         else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
+        else if (a == "--quality" && i + 1 < argc) {
+            if (!parse_quality(argv[++i], quality)) return usage(argv[0]);
+        }
         else return usage(argv[0]);
     }
     if (query != "closest" && query != "any") return usage(argv[0]);
@@ -76,12 +81,18 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "%s: %s\n", scene_name.c_str(), scene.skipped.c_str());
         return 1;
     }
-    auto const s = build_canopy(scene);
+    auto const build_start = std::chrono::steady_clock::now();
+    auto const s = build_canopy(scene, quality);
+    double const build_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - build_start).count();
     auto const st = canopy::compute_stats(s->mesh);
-    std::printf("mesh BVH: %zu triangles, %zu leaves (%.2f triangles each), %zu wide nodes, %zu blocks, depth %d, "
-                "SAH %.2f, %.1f bytes/triangle\n",
-                st.primitive_count, st.leaf_count, double(st.primitive_count) / double(st.leaf_count),
-                st.wide_node_count, s->mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive);
+    std::size_t references = 0;
+    for (auto const& n : s->mesh.nodes) references += n.is_leaf() ? n.count : 0;
+    std::printf("mesh BVH (%s): %zu triangles, %zu references, %zu leaves (%.2f references each), %zu wide nodes, "
+                "%zu blocks, depth %d, SAH %.2f, %.1f bytes/triangle, built in %.0f ms\n",
+                quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,
+                st.leaf_count, double(references) / double(st.leaf_count), st.wide_node_count,
+                s->mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive, build_ms);
     auto sets = make_rays(*s, s->instanced ? s->top.bounds() : s->mesh.bounds());
     for (auto& set : sets) {
         if (set.name != set_name) continue;

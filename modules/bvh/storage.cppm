@@ -123,6 +123,28 @@ struct sah_costs {
     float intersection = 1.0f;
 };
 
+// How hard the builder works on triangle BVHs (other primitives are always built `fast`).
+//   fast  binned SAH over object splits (the default).
+//   high  spatial splits as well (canopy.bvh:spatial, Stich et al. 2009): a triangle whose box
+//         is much larger than itself (long thin triangles, slivers) may be referenced from
+//         several leaves, each bounding only its part. Builds take longer and use more memory.
+enum class build_quality { fast, high };
+
+// The builder's options, one aggregate with its defaults.
+struct bvh_build_options {
+    int max_leaf_size = 0;                    // primitives per leaf; 0: triangle_block_width for triangle BVHs, else 4
+    int bins = 16;                            // SAH bins per axis (2 … 256)
+    int max_depth = bvh_max_depth;            // clamped to [1, bvh_max_depth]
+    sah_costs costs = {};
+    std::size_t parallel_threshold = 4096;    // subtrees with more primitives become parallel tasks
+    build_quality quality = build_quality::fast;
+    // high: extra references spatial splits may add, as a fraction of the triangle count (≥ 0).
+    float split_budget = 0.3f;
+    // high: spatial splits are tried where the two sides of the best object split overlap by more
+    // than this fraction of the root's surface area (Stich et al.'s α).
+    float split_overlap = 1e-5f;
+};
+
 struct bvh_stats {
     std::size_t node_count = 0;
     std::size_t leaf_count = 0;
