@@ -553,12 +553,9 @@ std::size_t check_split_build(std::vector<triangle> const& input, mesh_bvh const
 
 TEST_CASE("build_quality::high references every triangle whole, by input index, from leaves whose boxes cover it") {
     random_source rng(71);
-    // Long thin random triangles: two corners close together, the third far away.
-    std::vector<triangle> needles;
-    for (int i = 0; i < 1500; ++i) {
-        vec3<float> const a = rng.point(-5, 5), d = rng.point(-0.01f, 0.01f), far = rng.point(-5, 5);
-        needles.push_back({a, a + d, far, std::uint32_t(777), std::uint32_t(i % 5)});
-    }
+    // Long thin random triangles, prim_id deliberately wrong: the builder must renumber.
+    auto needles = test_support::needle_soup(rng, 1500, 5.0f, 0.01f);
+    for (auto& t : needles) t.prim_id = 777;
     std::vector<std::pair<char const*, std::vector<triangle>>> const inputs{{"slivers", test_support::sliver_mesh()},
                                                                            {"needles", needles}};
     for (auto const& [name, input] : inputs) {

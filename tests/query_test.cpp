@@ -940,11 +940,7 @@ std::vector<ray> rays_for(std::vector<triangle> const& tris, canopy::aabb const&
 
 TEST_CASE("queries through BVHs built with spatial splits equal brute force on slivers and long thin triangles") {
     random_source rng(111);
-    std::vector<triangle> needles;
-    for (int i = 0; i < 1200; ++i) {
-        vec3<float> const a = rng.point(-5, 5), far = rng.point(-5, 5);
-        needles.push_back({a, a + rng.point(-0.02f, 0.02f), far, std::uint32_t(i), std::uint32_t(i % 3)});
-    }
+    auto const needles = test_support::needle_soup(rng, 1200, 5.0f, 0.02f);
     auto const masked_test = [](ray const& r, triangle const& tri) {
         auto hr = canopy::intersect(r, tri);
         if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);

@@ -63,6 +63,17 @@ inline std::vector<canopy::triangle> triangle_soup(random_source& rng, int count
     return soup;
 }
 
+// `count` long thin triangles: two corners within `width` of each other, the third anywhere,
+// all within `extent` of the origin; prim_id = index, geom_id = index mod 3.
+inline std::vector<canopy::triangle> needle_soup(random_source& rng, int count, float extent, float width) {
+    std::vector<canopy::triangle> out;
+    for (int i = 0; i < count; ++i) {
+        canopy::vec3<float> const a = rng.point(-extent, extent), far = rng.point(-extent, extent);
+        out.push_back({a, a + rng.point(-width, width), far, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(i % 3)});
+    }
+    return out;
+}
+
 // Long thin triangles in one mesh (prim_id = index, geom_id 0), where spatial splits
 // (build_quality::high) reference one triangle from several leaves: 400 triangles of a disk fan
 // of aspect 1e3, a fan of 128 needles of aspect 1e5, a closed bicone of 512 slivers (half length

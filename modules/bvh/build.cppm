@@ -2,6 +2,10 @@
 // Volume Hierarchies"), binning primitive centroids on all three axes, subtrees built in parallel
 // (oneTBB task groups).
 //
+// bvh_build_options::quality = build_quality::high hands triangle BVHs to the split-BVH builder
+// (canopy.bvh:spatial), where a triangle may be referenced from several leaves; the rest of this
+// comment is about the default, build_quality::fast.
+//
 // Contract: every input primitive appears exactly once in the result; a primitive type with a
 // `prim_id` member gets prim_id = its index in the input sequence. Leaves hold at most
 // max_leaf_size primitives, except where max_depth stops the recursion or all centroids coincide
