@@ -29,10 +29,10 @@ struct canopy_scene {
     std::size_t bytes = 0;
 };
 
-// The mesh is built at `quality` (the top level over instances always builds `fast`).
-std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in, build_quality quality = build_quality::fast) {
+// The mesh is built with `mesh_options` (the top level over instances with the defaults).
+std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in, bvh_build_options const& mesh_options = {}) {
     auto s = std::make_unique<canopy_scene>();
-    s->mesh = build_binned_sah(in.mesh, {.quality = quality});
+    s->mesh = build_binned_sah(in.mesh, mesh_options);
     s->bytes = compute_stats(s->mesh).bytes;
     if (!in.instances.empty()) {
         for (std::size_t k = 0; k < in.instances.size(); ++k)

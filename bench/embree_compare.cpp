@@ -396,7 +396,7 @@ void run_scene(bench_scene const& in, settings const& opt) {
         auto const canopy_build = [&] {
             cs.reset();
             auto const t = clock_type::now();
-            cs = build_canopy(in, opt.quality);
+            cs = build_canopy(in, {.quality = opt.quality});
             return seconds_since(t) * 1e3;
         };
         auto const embree_build = [&] {
