@@ -29,9 +29,10 @@ struct canopy_scene {
     std::size_t bytes = 0;
 };
 
-std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in) {
+// The mesh is built with `mesh_options` (the top level over instances with the defaults).
+std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in, bvh_build_options const& mesh_options = {}) {
     auto s = std::make_unique<canopy_scene>();
-    s->mesh = build_binned_sah(in.mesh);
+    s->mesh = build_binned_sah(in.mesh, mesh_options);
     s->bytes = compute_stats(s->mesh).bytes;
     if (!in.instances.empty()) {
         for (std::size_t k = 0; k < in.instances.size(); ++k)
@@ -41,6 +42,14 @@ std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in) {
         s->instanced = true;
     }
     return s;
+}
+
+// "fast" or "high" → the build quality; false for another name.
+inline bool parse_quality(std::string const& name, build_quality& quality) {
+    if (name == "fast") quality = build_quality::fast;
+    else if (name == "high") quality = build_quality::high;
+    else return false;
+    return true;
 }
 
 template <typename Isect>

@@ -2,7 +2,7 @@
 //
 //   canopy_bench_embree [--scenes sphere,terrain,soup,forest,engine,bunny,slivers]
 //                       [--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2]
-//                       [--rays primary,random,shadow]
+//                       [--rays primary,random,shadow] [--quality fast|high]
 //
 // Scenes (canopy.bench_scenes, bench/bench_scenes.cppm): a 1.3M-triangle icosphere, a 2M-triangle
 // terrain, a 500k triangle soup, a forest of 10,000 instances of a 51k-triangle tree, two real
@@ -28,6 +28,10 @@
 // ray/box and ray/triangle tests per ray, through a counting intersector. Agreement: the rays
 // whose hit/miss differs between the libraries, and for closest hits the rays both hit whose
 // (instance, primitive) differs (informational: ties and near-ties may go either way).
+//
+// --quality high builds Canopy's meshes with spatial splits (build_quality::high) and Embree's
+// scenes and triangle geometries with RTC_BUILD_QUALITY_HIGH (its split BVH); the default, fast,
+// is Canopy's default against Embree's default (medium) quality.
 //
 // Output: Markdown, one table per scene.
 #include <algorithm>
@@ -157,10 +161,15 @@ RTCGeometry embree_instance(RTCDevice device, RTCScene mesh, canopy::affine_tran
     return inst;
 }
 
-std::unique_ptr<embree_scene> build_embree(RTCDevice device, bench_scene const& in, bool alpha) {
+std::unique_ptr<embree_scene> build_embree(RTCDevice device, bench_scene const& in, bool alpha,
+                                           canopy::build_quality quality) {
     auto s = std::make_unique<embree_scene>();
     s->mesh = rtcNewScene(device);
     RTCGeometry geom = embree_triangles(device, in.mesh, alpha);
+    if (quality == canopy::build_quality::high) {
+        rtcSetSceneBuildQuality(s->mesh, RTC_BUILD_QUALITY_HIGH);
+        rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
+    }
     rtcAttachGeometry(s->mesh, geom);
     rtcReleaseGeometry(geom);
     rtcCommitScene(s->mesh);
@@ -302,6 +311,7 @@ struct settings {
     int rounds = 5;
     bool quick = false;
     std::vector<std::string> ray_sets{"primary", "random", "shadow"};
+    canopy::build_quality quality = canopy::build_quality::fast;
 };
 
 // What the figures of one thread count trace.
@@ -386,14 +396,14 @@ void run_scene(bench_scene const& in, settings const& opt) {
         auto const canopy_build = [&] {
             cs.reset();
             auto const t = clock_type::now();
-            cs = build_canopy(in);
+            cs = build_canopy(in, {.quality = opt.quality});
             return seconds_since(t) * 1e3;
         };
         auto const embree_build = [&] {
             es.reset();
             embree_bytes = 0;
             auto const t = clock_type::now();
-            es = build_embree(device, in, false);
+            es = build_embree(device, in, false, opt.quality);
             double const ms = seconds_since(t) * 1e3;
             embree_memory = embree_bytes.load();
             return ms;
@@ -402,7 +412,7 @@ void run_scene(bench_scene const& in, settings const& opt) {
         canopy_build();
         embree_build();
         samples const builds = interleaved_rounds(opt.rounds, canopy_build, embree_build);
-        std::unique_ptr<embree_scene> es_alpha = build_embree(device, in, true);
+        std::unique_ptr<embree_scene> es_alpha = build_embree(device, in, true, opt.quality);
         if (sets.empty()) {
             double const triangles = double(in.mesh.size());
             print_row("–", "memory (bytes/triangle stored)", {double(cs->bytes) / triangles, double(cs->bytes) / triangles},
@@ -452,6 +462,9 @@ std::optional<settings> parse_command_line(int argc, char** argv) {
         else if (name == "--scenes") opt.scenes = split_list(value);
         else if (name == "--rounds") opt.rounds = std::max(1, std::atoi(value));
         else if (name == "--rays") opt.ray_sets = split_list(value);
+        else if (name == "--quality") {
+            if (!canopy::bench::parse_quality(value, opt.quality)) return std::nullopt;
+        }
         else if (name == "--threads-list") {
             opt.threads.clear();
             for (auto const& t : split_list(value)) opt.threads.push_back(std::max(1, std::atoi(t.c_str())));
@@ -488,8 +501,11 @@ std::string cpu_model() {
 void print_header(settings const& opt) {
     fmt::print("# Canopy vs Embree {}.{}.{}: same scenes, same rays\n\n", RTC_VERSION_MAJOR, RTC_VERSION_MINOR,
                RTC_VERSION_PATCH);
-    fmt::print("Median and best of {} interleaved rounds{}. CPU: {}. Canopy ISA: {}.\n\n", opt.rounds,
-               opt.quick ? " (--quick: scenes shrunk about 16×)" : "", cpu_model(), canopy::simd::build_isa());
+    fmt::print("Median and best of {} interleaved rounds{}. CPU: {}. Canopy ISA: {}. Build quality: {}.\n\n",
+               opt.rounds, opt.quick ? " (--quick: scenes shrunk about 16×)" : "", cpu_model(),
+               canopy::simd::build_isa(),
+               opt.quality == canopy::build_quality::high ? "high (Canopy: spatial splits; Embree: RTC_BUILD_QUALITY_HIGH)"
+                                                          : "fast (Canopy's default; Embree: its default, medium)");
     fmt::print("Rays in Mrays/s (ratio > 1: Canopy faster); build in ms (ratio > 1: Canopy slower); memory in bytes "
                "per stored triangle. Ratios Canopy / Embree; the ratio of medians (bold) is the main figure. Work "
                "counts: Canopy's tests per ray. Disagreements: rays whose hit/miss differs (closest: / rays both "
@@ -504,7 +520,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr,
                      "usage: %s [--scenes sphere,terrain,soup,forest,engine,bunny,slivers] "
                      "[--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2] "
-                     "[--rays primary,random,shadow]\n",
+                     "[--rays primary,random,shadow] [--quality fast|high]\n",
                      argv[0]);
         return 2;
     }

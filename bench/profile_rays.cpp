@@ -2,13 +2,16 @@
 // callgrind counts instructions per ray (bench/profile.sh), perf samples where the time goes.
 //
 //   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]
+//                        [--quality fast|high] [--split-budget F]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow        QUERY  closest | any
 //
 // Traces the first N rays of the set (default: all) P times (default 1) inside trace_rays, the
 // only function a profiler needs to look at, then prints the ray count, hits, nanoseconds per ray
 // (the fastest pass) and, from an untimed pass with a counting intersector, box and triangle
-// tests per ray.
+// tests per ray. The mesh BVH is built at --quality (default fast; high: spatial splits, with
+// --split-budget, default 0.3); its statistics line gives the references its leaves hold, its SAH
+// cost and its build time.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -30,7 +33,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality fast|high] [--split-budget F]\n",
                  program);
     return 2;
 }
@@ -61,6 +64,7 @@ int main(int argc, char** argv) {
     bool quick = false, alpha = false, alpha_hook = false;
     std::size_t count = 0;
     int passes = 1;
+    canopy::bvh_build_options options;
     for (int i = 4; i < argc; ++i) {
         std::string const a = argv[i];
         if (a == "--quick") quick = true;
@@ -68,6 +72,11 @@ int main(int argc, char** argv) {
         else if (a == "--alpha-hook") alpha_hook = true;
         else if (a == "--count" && i + 1 < argc) count = std::size_t(std::atoll(argv[++i]));
         else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
+        else if (a == "--quality" && i + 1 < argc) {
+            if (!parse_quality(argv[++i], options.quality)) return usage(argv[0]);
+        } else if (a == "--split-budget" && i + 1 < argc) {
+            options.split_budget = float(std::atof(argv[++i]));
+        }
         else return usage(argv[0]);
     }
     if (query != "closest" && query != "any") return usage(argv[0]);
@@ -76,12 +85,18 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "%s: %s\n", scene_name.c_str(), scene.skipped.c_str());
         return 1;
     }
-    auto const s = build_canopy(scene);
+    auto const build_start = std::chrono::steady_clock::now();
+    auto const s = build_canopy(scene, options);
+    double const build_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - build_start).count();
     auto const st = canopy::compute_stats(s->mesh);
-    std::printf("mesh BVH: %zu triangles, %zu leaves (%.2f triangles each), %zu wide nodes, %zu blocks, depth %d, "
-                "SAH %.2f, %.1f bytes/triangle\n",
-                st.primitive_count, st.leaf_count, double(st.primitive_count) / double(st.leaf_count),
-                st.wide_node_count, s->mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive);
+    std::size_t references = 0;
+    for (auto const& n : s->mesh.nodes) references += n.is_leaf() ? n.count : 0;
+    std::printf("mesh BVH (%s): %zu triangles, %zu references, %zu leaves (%.2f references each), %zu wide nodes, "
+                "%zu blocks, depth %d, SAH %.2f, %.1f bytes/triangle, built in %.0f ms\n",
+                options.quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,
+                st.leaf_count, double(references) / double(st.leaf_count), st.wide_node_count,
+                s->mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive, build_ms);
     auto sets = make_rays(*s, s->instanced ? s->top.bounds() : s->mesh.bounds());
     for (auto& set : sets) {
         if (set.name != set_name) continue;

@@ -7,6 +7,8 @@ export import canopy.intersector;
 export import :storage;
 export import :parallel;
 export import :wide;
+export import :binning;
+export import :spatial;
 export import :build;
 export import :traverse;
 export import :instance;

@@ -57,6 +57,11 @@
 //   A filter must be a function of the candidate it is given: which candidates it sees, and in
 //   which order, depends on the leaf layout (a closer accepted hit makes farther ones no longer
 //   candidates).
+// - BVHs built with spatial splits (build_quality::high, canopy.bvh:spatial) may hold one triangle
+//   in several leaves. The queries still report it once per ray, but a triangle hook and a filter
+//   are then called at least once for each triangle a ray meets, possibly once per leaf holding
+//   it (each time with the same triangle and the same candidate). With build_quality::fast (the
+//   default) every triangle is in one leaf.
 module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
 // every path (scalar, SIMD, packet) rounds the same way.

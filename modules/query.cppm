@@ -6,7 +6,8 @@
 // - hooks receive a ray whose tmax is the closest accepted hit so far (closest_hit), or the N-th
 //   accepted hit once N are found (multi_hit): intersect() inside a hook already culls.
 // - any_hit stays any-hit in nested BVHs and stops the whole traversal at the first accepted hit.
-// - multi_hit<N> returns up to N accepted hits sorted by t, each (instance path, primitive) once.
+// - multi_hit<N> returns up to N accepted hits sorted by t, each (instance path, primitive) once,
+//   also when spatial splits (build_quality::high) put a triangle in several leaves.
 // - Equal t: the hit with the smaller (inst_id, inner_inst_id…, prim_id) wins, so results do not
 //   depend on traversal order (BVH, brute force, packets and threads agree).
 // Rays with a NaN or infinite origin or direction component, a NaN tmin/tmax, or tmin > tmax
@@ -109,9 +110,16 @@ struct multi_query : instance_path {
         if (!hr.hit) return false;
         stamp(hr);
         if (count == N && !precedes(hr, hits[N - 1])) return false;
-        // Insertion into the sorted list, dropping the last one when full.
+        // Where it goes in the sorted list. A triangle that spatial splits put in several leaves
+        // comes back with the same record: the hits it would follow include that record, if it
+        // was kept (equal t and ids sort together), and then it is dropped.
+        std::size_t at = count;
+        while (at > 0 && precedes(hr, hits[at - 1])) --at;
+        for (std::size_t k = at; k > 0 && !precedes(hits[k - 1], hr); --k)
+            if (hits[k - 1].prim_id == hr.prim_id && hits[k - 1].geom_id == hr.geom_id) return false;
+        // Insertion, dropping the last one when full.
         std::size_t i = count < N ? count++ : N - 1;
-        for (; i > 0 && precedes(hr, hits[i - 1]); --i) hits[i] = hits[i - 1];
+        for (; i > at; --i) hits[i] = hits[i - 1];
         hits[i] = hr;
         if (count == N) ray.tmax = hits[N - 1].t;
         return false;

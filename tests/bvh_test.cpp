@@ -467,3 +467,132 @@ TEST_CASE("instance bounds hold the transformed geometry") {
         CHECK_FALSE(canopy::is_empty(box));
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// build_quality::high (spatial splits): a triangle may be referenced from several leaves, each
+// leaf box bounding only its part of it.
+
+namespace {
+
+// Points of a triangle, in double (exact for the vertices and the edge midpoints, within 2^-50 or
+// so of the triangle for the others): its vertices, edge points and interior points.
+std::vector<vec3<double>> points_of(triangle const& t, random_source& rng) {
+    vec3<double> const a(t.v0), b(t.v1), c(t.v2);
+    std::vector<vec3<double>> out{a, b, c, (a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5};
+    for (int k = 0; k < 12; ++k) {
+        double u = rng.uniform_double(0, 1), v = rng.uniform_double(0, 1);
+        if (u + v > 1) u = 1 - u, v = 1 - v;
+        if (k < 3) v = 0; // on an edge
+        out.push_back(a + (b - a) * u + (c - a) * v);
+    }
+    return out;
+}
+
+// The contract of a build at high quality: the tree is well formed, every input triangle is
+// referenced by one leaf or more (never twice by one leaf), stored whole with prim_id = its input
+// index, and the boxes of the leaves that reference it cover it. Returns the number of references.
+std::size_t check_split_build(std::vector<triangle> const& input, mesh_bvh const& b, float budget, random_source& rng) {
+    REQUIRE(b.primitive_count() == input.size());
+    walk_result const w = walk(b);
+    CHECK(w.structure_ok);
+    CHECK(w.nodes_reached == b.nodes.size());
+    CHECK(w.inner_bounds_ok);
+    CHECK(w.levels == b.depth);
+    CHECK(w.leaves * 2 - 1 == b.nodes.size());
+    std::vector<std::vector<canopy::aabb>> leaf_boxes(input.size());
+    std::size_t references = 0;
+    bool ids_ok = true, once_per_leaf = true;
+    for (auto const& node : b.nodes) {
+        if (!node.is_leaf()) continue;
+        std::vector<std::uint32_t> in_leaf;
+        canopy::for_each_leaf_primitive(b, node.index, node.count, [&](triangle const& p) {
+            ++references;
+            if (p.prim_id >= input.size()) {
+                ids_ok = false;
+                return;
+            }
+            ids_ok = ids_ok && same_vertices(p, input[p.prim_id]) && p.geom_id == input[p.prim_id].geom_id;
+            once_per_leaf = once_per_leaf && std::find(in_leaf.begin(), in_leaf.end(), p.prim_id) == in_leaf.end();
+            in_leaf.push_back(p.prim_id);
+            leaf_boxes[p.prim_id].push_back(node.bounds);
+        });
+    }
+    CHECK(ids_ok);
+    CHECK(once_per_leaf);
+    CHECK(references <= input.size() + std::size_t(double(input.size()) * double(budget)));
+    std::size_t uncovered = 0, unreferenced = 0;
+    for (std::size_t i = 0; i < input.size(); ++i) {
+        unreferenced += leaf_boxes[i].empty();
+        for (vec3<double> const& p : points_of(input[i], rng)) {
+            double const tolerance = 1e-13 * (1.0 + std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z)}));
+            bool const inside = std::any_of(leaf_boxes[i].begin(), leaf_boxes[i].end(), [&](canopy::aabb const& box) {
+                for (int a = 0; a < 3; ++a)
+                    if (!(double(box.min[a]) - tolerance <= p[a] && p[a] <= double(box.max[a]) + tolerance)) return false;
+                return true;
+            });
+            uncovered += !inside;
+        }
+    }
+    CHECK(unreferenced == 0);
+    CHECK(uncovered == 0);
+    // The wide tree: well formed, every triangle in one of its leaves or more.
+    wide_walk_result const ww = walk_wide(b);
+    CHECK(ww.structure_ok);
+    CHECK(ww.unused_ok);
+    CHECK(ww.nodes_reached == b.wide_nodes.size());
+    CHECK(std::all_of(ww.primitive_owners.begin(), ww.primitive_owners.end(), [](int n) { return n >= 1; }));
+    CHECK(box_contains(ww.root_union, b.bounds()));
+    return references;
+}
+
+} // namespace
+
+TEST_CASE("build_quality::high references every triangle whole, by input index, from leaves whose boxes cover it") {
+    random_source rng(71);
+    // Long thin random triangles, prim_id deliberately wrong: the builder must renumber.
+    auto needles = test_support::needle_soup(rng, 1500, 5.0f, 0.01f);
+    for (auto& t : needles) t.prim_id = 777;
+    std::vector<std::pair<char const*, std::vector<triangle>>> const inputs{{"slivers", test_support::sliver_mesh()},
+                                                                           {"needles", needles}};
+    for (auto const& [name, input] : inputs) {
+        for (canopy::bvh_build_options const options :
+             {canopy::bvh_build_options{.quality = canopy::build_quality::high},
+              canopy::bvh_build_options{.max_leaf_size = 1, .bins = 8, .quality = canopy::build_quality::high},
+              canopy::bvh_build_options{.quality = canopy::build_quality::high, .split_budget = 2.0f}}) {
+            INFO(name << ", max_leaf_size " << options.max_leaf_size << ", split budget " << options.split_budget);
+            mesh_bvh const high = canopy::build_binned_sah(input, options);
+            std::size_t const references = check_split_build(input, high, options.split_budget, rng);
+            CHECK(references > input.size() + input.size() / 20); // spatial splits did happen
+            // The SAH cost falls below the object-split build's.
+            auto fast = options;
+            fast.quality = canopy::build_quality::fast;
+            CHECK(canopy::compute_stats(high).sah_cost < canopy::compute_stats(canopy::build_binned_sah(input, fast)).sah_cost);
+        }
+    }
+    // No budget: no reference is added.
+    auto const slivers = test_support::sliver_mesh();
+    mesh_bvh const none = canopy::build_binned_sah(slivers, {.quality = canopy::build_quality::high, .split_budget = 0.0f});
+    CHECK(check_split_build(slivers, none, 0.0f, rng) == slivers.size());
+}
+
+TEST_CASE("build_quality::high keeps max_depth, and never splits triangles with NaN or infinite coordinates") {
+    random_source rng(72);
+    auto input = test_support::sliver_mesh();
+    for (int max_depth : {1, 2, 5}) {
+        mesh_bvh const b = canopy::build_binned_sah(input, {.max_depth = max_depth, .quality = canopy::build_quality::high});
+        CHECK(b.depth <= max_depth);
+        check_split_build(input, b, 0.3f, rng);
+    }
+    float const nan = std::numeric_limits<float>::quiet_NaN();
+    std::size_t const finite = input.size();
+    input.push_back({{nan, 0, 0}, {1, 1, 1}, {2, 0, 1}, 0, 0});
+    input.push_back({{-inf, 0, 0}, {inf, 1, 1}, {2, 0, 1}, 0, 0});
+    input.push_back({{0, 0, 0}, {1e30f, 1e30f, 0}, {0, 1, 0}, 0, 0});
+    mesh_bvh const b = canopy::build_binned_sah(input, {.quality = canopy::build_quality::high});
+    REQUIRE(b.primitive_count() == input.size());
+    std::vector<int> seen(input.size(), 0);
+    canopy::for_each_primitive(b, [&](triangle const& p) { ++seen[p.prim_id]; });
+    CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n >= 1; }));
+    CHECK(seen[finite] == 1);
+    CHECK(seen[finite + 1] == 1);
+}

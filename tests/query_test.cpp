@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <random>
 #include <tuple>
 #include <type_traits>
@@ -889,4 +890,152 @@ TEST_CASE("queries over empty ranges and rays with an empty interval miss") {
     nan_ray.tmin = std::numeric_limits<float>::quiet_NaN();
     CHECK_FALSE(canopy::closest_hit(nan_ray, &b, &b + 1).hit);
     CHECK_FALSE(canopy::multi_hit<2>(nan_ray, &b, &b + 1)[0].hit);
+}
+
+// ---------------------------------------------------------------------------------------------
+// BVHs built with spatial splits (build_quality::high): one triangle may sit in several leaves.
+
+namespace {
+
+// The checkerboard alpha as a filter (the library's SIMD test, then the rule on u, v).
+struct alpha_filter : canopy::basic_intersector<alpha_filter> {
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) const {
+        return checkerboard_opaque(hr.u, hr.v);
+    }
+};
+
+// Counts the calls of its triangle hook, and of its filter, per prim_id.
+struct counting_hooks : canopy::basic_intersector<counting_hooks> {
+    using canopy::basic_intersector<counting_hooks>::operator();
+    std::map<std::uint32_t, int>* hook_calls = nullptr;
+    template <typename Ray>
+    auto operator()(Ray const& r, triangle const& tri) {
+        ++(*hook_calls)[tri.prim_id];
+        return intersect(r, tri);
+    }
+};
+struct counting_filter : canopy::basic_intersector<counting_filter> {
+    std::map<std::uint32_t, int>* filter_calls = nullptr;
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) {
+        ++(*filter_calls)[hr.prim_id];
+        return true;
+    }
+};
+
+// Random rays, and rays aimed exactly at vertices and edge midpoints of random triangles.
+std::vector<ray> rays_for(std::vector<triangle> const& tris, canopy::aabb const& bounds, random_source& rng, int count) {
+    auto rays = random_rays(rng, bounds, count);
+    for (int i = 0; i < count; ++i) {
+        triangle const& t = tris[std::size_t(rng.integer(0, int(tris.size()) - 1))];
+        vec3<float> const target = i % 2 == 0 ? t.v0 : (t.v1 + t.v2) * 0.5f;
+        vec3<float> const origin = target + rng.point(-2.0f, 2.0f);
+        rays.push_back({origin, 0.0f, target - origin, inf});
+    }
+    return rays;
+}
+
+} // namespace
+
+TEST_CASE("queries through BVHs built with spatial splits equal brute force on slivers and long thin triangles") {
+    random_source rng(111);
+    auto const needles = test_support::needle_soup(rng, 1200, 5.0f, 0.02f);
+    auto const masked_test = [](ray const& r, triangle const& tri) {
+        auto hr = canopy::intersect(r, tri);
+        if (hr.hit) hr.hit = checkerboard_opaque(hr.u, hr.v);
+        return hr;
+    };
+    std::vector<std::vector<triangle>> const inputs{needles, test_support::sliver_mesh()};
+    for (auto const& input : inputs) {
+        for (canopy::bvh_build_options const options :
+             {canopy::bvh_build_options{.quality = canopy::build_quality::high},
+              canopy::bvh_build_options{.max_leaf_size = 1, .quality = canopy::build_quality::high, .split_budget = 1.0f}}) {
+            mesh_bvh const b = canopy::build_binned_sah(input, options);
+            std::size_t references = 0;
+            canopy::for_each_primitive(b, [&](triangle const&) { ++references; });
+            REQUIRE(references > input.size() + input.size() / 20);
+            query_agreement plain, hook, filtered;
+            int packet_mismatches = 0;
+            auto const rays = rays_for(input, b.bounds(), rng, 300);
+            for (std::size_t i = 0; i < rays.size(); ++i) {
+                ray const& r = rays[i];
+                compare_queries(r, &b, &b + 1, brute_force_hits(r, input, library_test),
+                                [] { return canopy::default_intersector{}; }, plain);
+                auto const masked = brute_force_hits(r, input, masked_test);
+                compare_queries(r, &b, &b + 1, masked, [] { return alpha_mask{}; }, hook);
+                compare_queries(r, &b, &b + 1, masked, [] { return alpha_filter{}; }, filtered);
+                if (i % 8 == 7) {
+                    std::array<ray, 8> lanes;
+                    for (std::size_t k = 0; k < 8; ++k) lanes[k] = rays[i - 7 + k];
+                    auto const packet = canopy::closest_hit(pack(lanes), &b, &b + 1);
+                    for (int k = 0; k < 8; ++k)
+                        packet_mismatches += !lane_equals(packet, k, canopy::closest_hit(lanes[std::size_t(k)], &b, &b + 1));
+                }
+            }
+            require_agreement(plain, 150);
+            require_agreement(hook, 100);
+            require_agreement(filtered, 100);
+            CHECK(packet_mismatches == 0);
+        }
+    }
+}
+
+TEST_CASE("multi_hit reports a triangle referenced from several leaves once, whose hooks may see it once per leaf") {
+    random_source rng(112);
+    // A long triangle in the tilted plane z = 0.1 x, and small triangles around it (off the ray).
+    std::vector<triangle> tris{{{-10, 0, -1}, {10, 0.002f, 1}, {10, -0.002f, 1}, 0, 0}};
+    for (int i = 1; i <= 300; ++i) {
+        float const x = rng.uniform(-10, 10), side = rng.uniform(0.2f, 1.0f) * (i % 2 ? 1.0f : -1.0f);
+        vec3<float> const c(x, side, 0.1f * x);
+        tris.push_back({c, c + rng.point(-0.1f, 0.1f), c + rng.point(-0.1f, 0.1f), std::uint32_t(i), 0});
+    }
+    mesh_bvh const b = canopy::build_binned_sah(tris, {.quality = canopy::build_quality::high});
+    int leaves_of_long = 0;
+    canopy::for_each_primitive(b, [&](triangle const& t) { leaves_of_long += t.prim_id == 0; });
+    REQUIRE(leaves_of_long >= 3);
+    int duplicated_rays = 0;
+    query_agreement agreement;
+    for (int k = 0; k < 50; ++k) {
+        // Nearly along the long triangle, crossing its plane once, near x = 0: through the boxes
+        // of several of its parts.
+        float const x0 = rng.uniform(-2, 2);
+        ray const r{{-10, rng.uniform(-0.0005f, 0.0005f), -1 + 0.05f}, 0.0f, {20, 0, 2.0f - 0.1f + 0.01f * x0}, inf};
+        auto const expected = brute_force_hits(r, tris, library_test);
+        REQUIRE(!expected.empty());
+        REQUIRE(expected[0].prim_id == 0);
+        compare_queries(r, &b, &b + 1, expected, [] { return canopy::default_intersector{}; }, agreement);
+        std::map<std::uint32_t, int> hook_calls, filter_calls;
+        counting_hooks hooks;
+        hooks.hook_calls = &hook_calls;
+        counting_filter filter;
+        filter.filter_calls = &filter_calls;
+        for (auto const& got : {canopy::multi_hit<8>(r, &b, &b + 1, hooks), canopy::multi_hit<8>(r, &b, &b + 1, filter)}) {
+            CHECK(std::count_if(got.begin(), got.end(), [](auto const& h) { return h.hit && h.prim_id == 0; }) == 1);
+            CHECK(same_record(got[0], expected[0]));
+        }
+        CHECK(hook_calls[0] >= 1);
+        CHECK(filter_calls[0] >= 1);
+        duplicated_rays += hook_calls[0] >= 2;
+    }
+    require_agreement(agreement, 50);
+    CHECK(duplicated_rays >= 10); // the rays did meet the triangle in several leaves
+}
+
+TEST_CASE("double-precision BVHs built with spatial splits equal brute force") {
+    random_source rng(113);
+    std::vector<canopy::basic_triangle<double>> tris;
+    auto const slivers = test_support::sliver_mesh();
+    for (triangle const& t : slivers)
+        tris.push_back({vec3<double>(t.v0), vec3<double>(t.v1), vec3<double>(t.v2), t.prim_id, t.geom_id});
+    auto const b = canopy::build_binned_sah(tris, {.quality = canopy::build_quality::high});
+    REQUIRE(b.primitives.size() > tris.size());
+    query_agreement agreement;
+    for (ray const& rf : rays_for(slivers, canopy::aabb{{-2, -2, -1}, {4, 2, 1}}, rng, 300)) {
+        canopy::basic_ray<double> const r{vec3<double>(rf.origin), 0.0, vec3<double>(rf.direction),
+                                          std::numeric_limits<double>::infinity()};
+        auto const expected = brute_force_hits(r, tris, library_test);
+        compare_queries(r, &b, &b + 1, expected, [] { return canopy::default_intersector{}; }, agreement);
+    }
+    require_agreement(agreement, 100);
 }

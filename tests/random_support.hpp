@@ -63,6 +63,54 @@ inline std::vector<canopy::triangle> triangle_soup(random_source& rng, int count
     return soup;
 }
 
+// `count` long thin triangles: two corners within `width` of each other, the third anywhere,
+// all within `extent` of the origin; prim_id = index, geom_id = index mod 3.
+inline std::vector<canopy::triangle> needle_soup(random_source& rng, int count, float extent, float width) {
+    std::vector<canopy::triangle> out;
+    for (int i = 0; i < count; ++i) {
+        canopy::vec3<float> const a = rng.point(-extent, extent), far = rng.point(-extent, extent);
+        out.push_back({a, a + rng.point(-width, width), far, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(i % 3)});
+    }
+    return out;
+}
+
+// Long thin triangles in one mesh (prim_id = index, geom_id 0), where spatial splits
+// (build_quality::high) reference one triangle from several leaves: 400 triangles of a disk fan
+// of aspect 1e3, a fan of 128 needles of aspect 1e5, a closed bicone of 512 slivers (half length
+// 1, radius 0.05) and a closed cylinder of radius 0.01 and length 3 (24 segments × 8 rings).
+inline std::vector<canopy::triangle> sliver_mesh() {
+    using v3 = canopy::vec3<float>;
+    constexpr double two_pi = 6.283185307179586;
+    std::vector<canopy::triangle> out;
+    auto const add = [&](v3 a, v3 b, v3 c) { out.push_back({a, b, c, static_cast<std::uint32_t>(out.size()), 0}); };
+    auto const circle = [&](v3 centre, v3 u, v3 w, double radius, int i, int segments) {
+        double const a = two_pi * double(i % segments) / double(segments);
+        return centre + (u * float(std::cos(a)) + w * float(std::sin(a))) * float(radius);
+    };
+    v3 const ex(1, 0, 0), ey(0, 1, 0), ez(0, 0, 1);
+    for (int i = 0; i < 400; ++i) add({0, 0, 0}, circle({0, 0, 0}, ex, ey, 1.0, i, 6283), circle({0, 0, 0}, ex, ey, 1.0, i + 1, 6283));
+    for (int i = 0; i < 128; ++i) {
+        float const w = 2.0f / 1e5f;
+        add({3.5f, 0, 0.25f}, {1.5f, w * float(i - 64), 0.25f}, {1.5f, w * float(i - 63), 0.25f});
+    }
+    v3 const centre(0, 1.5f, 0), left = centre - ex, right = centre + ex;
+    for (int i = 0; i < 256; ++i) {
+        add(left, circle(centre, ey, ez, 0.05, i + 1, 256), circle(centre, ey, ez, 0.05, i, 256));
+        add(right, circle(centre, ey, ez, 0.05, i, 256), circle(centre, ey, ez, 0.05, i + 1, 256));
+    }
+    auto const ring = [&](int k, int i) { return circle(v3(-1.5f + 3.0f * float(k) / 8.0f, -1.5f, 0), ey, ez, 0.01, i, 24); };
+    for (int k = 0; k < 8; ++k)
+        for (int i = 0; i < 24; ++i) {
+            add(ring(k, i), ring(k, i + 1), ring(k + 1, i + 1));
+            add(ring(k, i), ring(k + 1, i + 1), ring(k + 1, i));
+        }
+    for (int i = 0; i < 24; ++i) {
+        add({-1.5f, -1.5f, 0}, ring(0, i + 1), ring(0, i));
+        add({1.5f, -1.5f, 0}, ring(8, i), ring(8, i + 1));
+    }
+    return out;
+}
+
 // Rays from around the box towards random points inside it.
 inline std::vector<canopy::ray> random_rays(random_source& rng, canopy::aabb const& bounds, int count) {
     canopy::vec3<float> const c = (bounds.min + bounds.max) * 0.5f;

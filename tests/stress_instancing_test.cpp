@@ -190,15 +190,15 @@ void require_agreement(reference_comparison const& c) {
 TEST_CASE("an identity instance gives bit-identical results to no instance, at one and two levels") {
     random_source rng(1201);
     auto const mesh = object_mesh(rng);
-    mesh_bvh const b = canopy::build_binned_sah(mesh);
+    mesh_bvh const b = build_bvh(mesh);
     // The identity, and the identity written with -0 entries.
     std::vector<mesh_instance> const one{mesh_instance(b, transform::identity(), 9)};
     std::vector<mesh_instance> const negative_zeros{
         mesh_instance(b, transform::from_rows({1, -0.0f, 0, -0.0f, 0, 1, -0.0f, 0, -0.0f, 0, 1, -0.0f}), 4)};
-    instance_bvh const level1 = canopy::build_binned_sah(one);
-    instance_bvh const level1_zeros = canopy::build_binned_sah(negative_zeros);
+    instance_bvh const level1 = build_bvh(one);
+    instance_bvh const level1_zeros = build_bvh(negative_zeros);
     std::vector<nested_instance> const outer{nested_instance(level1, transform::identity(), 2)};
-    nested_bvh const level2 = canopy::build_binned_sah(outer);
+    nested_bvh const level2 = build_bvh(outer);
 
     std::vector<ray> rays;
     for (int i = 0; i < sized(2000, 50'000); ++i) {
@@ -264,7 +264,7 @@ namespace {
 template <typename Place>
 void check_sixteen_instances(random_source& rng, std::uint32_t first_id, Place&& place) {
     auto const mesh = object_mesh(rng);
-    mesh_bvh const b = canopy::build_binned_sah(mesh);
+    mesh_bvh const b = build_bvh(mesh);
     std::vector<mesh_instance> instances;
     std::vector<world_triangle> world;
     for (std::uint32_t i = 0; i < 16; ++i) {
@@ -272,7 +272,7 @@ void check_sixteen_instances(random_source& rng, std::uint32_t first_id, Place&&
         instances.emplace_back(b, m, first_id + i);
         append_world(world, mesh, first_id + i, invalid, m, nullptr);
     }
-    instance_bvh const top = canopy::build_binned_sah(instances);
+    instance_bvh const top = build_bvh(instances);
     reference_comparison c;
     for (ray const& r : rays_at(rng, world, sized(1500, 20'000))) compare_with_world(r, closest(r, top), world, c);
     require_agreement(c);
@@ -304,7 +304,7 @@ TEST_CASE("rotated and scaled instances give the closest hit of a world-space br
 TEST_CASE("two levels of rotated, scaled instances give the closest hit of a world-space brute force in double") {
     random_source rng(1204);
     auto const mesh = object_mesh(rng);
-    mesh_bvh const b = canopy::build_binned_sah(mesh);
+    mesh_bvh const b = build_bvh(mesh);
     std::vector<mesh_instance> inner;
     std::vector<transform> inner_transforms;
     for (std::uint32_t i = 0; i < 4; ++i) {
@@ -312,7 +312,7 @@ TEST_CASE("two levels of rotated, scaled instances give the closest hit of a wor
         inner_transforms.push_back(make_transform(random_rotation_rows(rng), scale, rng.point(-5.0f, 5.0f)));
         inner.emplace_back(b, inner_transforms.back(), 10 + i);
     }
-    instance_bvh const middle = canopy::build_binned_sah(inner);
+    instance_bvh const middle = build_bvh(inner);
     std::vector<nested_instance> outer;
     std::vector<world_triangle> world;
     for (std::uint32_t j = 0; j < 4; ++j) {
@@ -321,7 +321,7 @@ TEST_CASE("two levels of rotated, scaled instances give the closest hit of a wor
         outer.emplace_back(middle, m, 20 + j);
         for (std::uint32_t i = 0; i < 4; ++i) append_world(world, mesh, 20 + j, 10 + i, inner_transforms[i], &m);
     }
-    nested_bvh const top = canopy::build_binned_sah(outer);
+    nested_bvh const top = build_bvh(outer);
     reference_comparison c;
     for (ray const& r : rays_at(rng, world, sized(1500, 20'000))) compare_with_world(r, closest(r, top), world, c);
     require_agreement(c);

@@ -36,6 +36,21 @@ inline bool full_battery() {
     return value != nullptr && std::string_view(value) == "1";
 }
 
+// The build quality of the battery's BVHs: build_quality::high under CANOPY_STRESS_QUALITY=high
+// (ctest runs the battery at both qualities; see tests/CMakeLists.txt), else the default.
+inline canopy::build_quality stress_quality() {
+    char const* value = std::getenv("CANOPY_STRESS_QUALITY");
+    return value != nullptr && std::string_view(value) == "high" ? canopy::build_quality::high
+                                                                 : canopy::build_quality::fast;
+}
+
+// build_binned_sah at the battery's quality (spatial splits apply to triangle BVHs only).
+template <typename Prim>
+canopy::bvh<Prim> build_bvh(std::vector<Prim> const& prims, canopy::bvh_build_options options = {}) {
+    options.quality = stress_quality();
+    return canopy::build_binned_sah(prims, options);
+}
+
 // The default size, or the full one under CANOPY_STRESS_FULL=1.
 inline int sized(int small, int full) { return full_battery() ? full : small; }
 

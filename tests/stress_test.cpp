@@ -207,13 +207,13 @@ struct instanced_scene {
     instanced_scene(instanced_scene const&) = delete; // the instances point at `object`
     instanced_scene(std::vector<triangle> mesh_, random_source& rng) : mesh(std::move(mesh_)) {
         renumber(mesh);
-        object = canopy::build_binned_sah(mesh);
+        object = build_bvh(mesh);
         instances.emplace_back(object, transform::identity(), 0);
         instances.emplace_back(object, make_transform(no_rotation, {1, 1, 1},
                                                       {6.5f, -1.25f, 2.0f}),
                                1);
         instances.emplace_back(object, make_transform(random_rotation_rows(rng), {0.75, 1.5, 1.0}, {-5.0f, 3.0f, 1.0f}), 2);
-        top = canopy::build_binned_sah(instances);
+        top = build_bvh(instances);
     }
 };
 
@@ -300,7 +300,7 @@ TEST_CASE("rays from inside a closed icosphere never miss") {
     auto const sphere = canopy::make_icosphere(level, centre, radius);
     REQUIRE(sphere.size() == (std::size_t(20) << (2 * level)));
     REQUIRE(features_of(sphere).open_edges == 0);
-    mesh_bvh const b = canopy::build_binned_sah(sphere);
+    mesh_bvh const b = build_bvh(sphere);
 
     random_source rng(101);
     failure_log closest_misses, any_misses;
@@ -411,7 +411,7 @@ TEST_CASE("rays from inside a closed thin cylinder and a closed bicone of sliver
     for (shape const& sh : shapes) {
         INFO(sh.name << ", " << sh.tris.size() << " triangles, " << count << " rays from inside");
         REQUIRE(features_of(sh.tris).open_edges == 0);
-        mesh_bvh const b = canopy::build_binned_sah(sh.tris);
+        mesh_bvh const b = build_bvh(sh.tris);
         failure_log closest_misses, any_misses, brute_misses;
         auto const edges = features_of(sh.tris).edges;
         for (int i = 0; i < count; ++i) {
@@ -464,7 +464,7 @@ TEST_CASE("rays from inside aimed exactly at every vertex and edge midpoint hit 
     for (auto const& m : meshes) {
         mesh_features const f = features_of(m.tris);
         REQUIRE(f.open_edges == 0);
-        mesh_bvh const b = canopy::build_binned_sah(m.tris);
+        mesh_bvh const b = build_bvh(m.tris);
         failure_log vertex_failures, edge_failures;
         // Origins: the centre (0, 0, 0) and, for the dyadic mesh, small dyadic points around it.
         std::vector<vec3<float>> origins{{0.0f, 0.0f, 0.0f}};
@@ -523,7 +523,7 @@ void trace_through_fans(bool boundary, failure_log& failures, std::size_t& rays,
     random_source rng(boundary ? 203 : 202);
     for (auto const& fan : fans) {
         REQUIRE(fan.tris.size() == 64);
-        mesh_bvh const b = canopy::build_binned_sah(fan.tris);
+        mesh_bvh const b = build_bvh(fan.tris);
         // Above (+) or below (-) the height field at a point of the ray, 0 on it (up to rounding
         // of the test itself: rays in the plane of a face are skipped).
         auto const side = [&](dvec3 const& p) {
@@ -617,7 +617,7 @@ TEST_CASE("closed meshes translated to 1e3, 1.5e5 and 1e6 from the origin are ne
             // stays closed however much rounding distorts it.
             auto const moved = translated(m.tris, origin);
             mesh_features const f = features_of(moved);
-            mesh_bvh const b = canopy::build_binned_sah(moved);
+            mesh_bvh const b = build_bvh(moved);
             failure_log misses;
             std::string const where = std::string(m.name) + " at distance " + std::to_string(distance) + ": ";
             auto const trace = [&](vec3<float> const& d) {
@@ -669,7 +669,7 @@ TEST_CASE("axis-aligned rays against integer-grid geometry equal brute force and
         append_box(scene, lo, lo + size);
     }
     renumber(scene);
-    mesh_bvh const b = canopy::build_binned_sah(scene);
+    mesh_bvh const b = build_bvh(scene);
 
     // Directions along one axis or a diagonal of two, every zero component as +0 or -0.
     std::vector<vec3<float>> directions;
@@ -801,7 +801,7 @@ struct broken_ray_scene {
         scene.object,
         transform::from_rows({0.08838835f, -0.08838835f, 0, 1.0f, 0.08838835f, 0.08838835f, 0, -2.0f, 0, 0, 0.125f, 0.5f}),
         7)};
-    instance_bvh shrunk_top = canopy::build_binned_sah(shrunk);
+    instance_bvh shrunk_top = build_bvh(shrunk);
     std::vector<ray> valid = random_rays(rng, scene.object.bounds(), sized(48, 400));
 };
 
@@ -958,7 +958,7 @@ TEST_CASE("zero-area triangles are never hit, directly or through a BVH, slivers
     }
     renumber(degenerate);
     for (triangle const& t : degenerate) REQUIRE(exactly_degenerate(t));
-    mesh_bvh const b = canopy::build_binned_sah(degenerate);
+    mesh_bvh const b = build_bvh(degenerate);
 
     failure_log degenerate_hits;
     std::size_t rays = 0;
@@ -1012,7 +1012,7 @@ TEST_CASE("zero-area triangles are never hit, directly or through a BVH, slivers
     renumber(slivers);
     REQUIRE(slivers.size() > 250);
     auto const all = concatenate(degenerate, slivers);
-    mesh_bvh const mixed = canopy::build_binned_sah(all);
+    mesh_bvh const mixed = build_bvh(all);
     failure_log non_finite, mixed_failures;
     std::size_t sliver_hits = 0;
     for (triangle const& t : slivers) {
@@ -1109,13 +1109,13 @@ TEST_CASE("tmin and tmax at, just below and just above an exact hit distance: hi
         // The same triangle through a BVH, an identity instance, an integer translation and a
         // scale by 2 (all exact: the object-space ray has the same t).
         std::vector<triangle> const one{c.tri};
-        mesh_bvh const b = canopy::build_binned_sah(one);
+        mesh_bvh const b = build_bvh(one);
         triangle half = c.tri;
         half.v0 = half.v0 * 0.5f, half.v1 = half.v1 * 0.5f, half.v2 = half.v2 * 0.5f;
         std::vector<triangle> const halves{half};
-        mesh_bvh const half_bvh = canopy::build_binned_sah(halves);
+        mesh_bvh const half_bvh = build_bvh(halves);
         std::vector<triangle> const shifted = translated(one, {-3.0f, 5.0f, 1.0f});
-        mesh_bvh const shifted_bvh = canopy::build_binned_sah(shifted);
+        mesh_bvh const shifted_bvh = build_bvh(shifted);
         std::vector<mesh_instance> const instances{
             mesh_instance(b, transform::identity(), 0),
             mesh_instance(shifted_bvh, transform::from_rows({1, 0, 0, 3, 0, 1, 0, -5, 0, 0, 1, -1}), 1),
@@ -1157,7 +1157,7 @@ TEST_CASE("tmin and tmax at, just below and just above an exact hit distance: hi
 
     // Random geometry: the bounds are respected exactly around whatever t the test returns.
     auto const soup = triangle_soup(rng, 200, 4.0f, 1.0f);
-    mesh_bvh const b = canopy::build_binned_sah(soup);
+    mesh_bvh const b = build_bvh(soup);
     std::size_t random_hits = 0;
     for (ray const& base : random_rays(rng, b.bounds(), sized(400, 5000))) {
         record const h = closest(base, b);
@@ -1222,12 +1222,12 @@ TEST_CASE("multi_hit<N> equals the first N brute-force hits on a soup, stacked c
     auto const run = [&](std::vector<triangle> const& tris, std::vector<ray> const& rs, char const* name) {
         for (canopy::bvh_build_options const options :
              {canopy::bvh_build_options{}, canopy::bvh_build_options{.max_leaf_size = 1}}) {
-            mesh_bvh const b = canopy::build_binned_sah(tris, options);
+            mesh_bvh const b = build_bvh(tris, options);
             // Two identity instances (every hit twice, at equal t) and a translated one.
             std::vector<mesh_instance> const instances{
                 mesh_instance(b, transform::identity(), 7), mesh_instance(b, transform::identity(), 3),
                 mesh_instance(b, transform::from_rows({1, 0, 0, 0.5f, 0, 1, 0, 0.25f, 0, 0, 1, 0}), 5)};
-            instance_bvh const top = canopy::build_binned_sah(instances);
+            instance_bvh const top = build_bvh(instances);
             for (ray const& r : rs) {
                 ++rays;
                 auto const expected = brute_force_hits(r, tris);
@@ -1240,7 +1240,7 @@ TEST_CASE("multi_hit<N> equals the first N brute-force hits on a soup, stacked c
     };
 
     auto const soup = triangle_soup(rng, 400, 2.0f, 1.5f);
-    run(soup, random_rays(rng, canopy::build_binned_sah(soup).bounds(), sized(300, 3000)), "soup");
+    run(soup, random_rays(rng, build_bvh(soup).bounds(), sized(300, 3000)), "soup");
 
     // Eight copies of one triangle (prim ids 0..7): every ray through it hits all eight at equal t,
     // also exactly through its vertices and edges.
@@ -1261,7 +1261,7 @@ TEST_CASE("multi_hit<N> equals the first N brute-force hits on a soup, stacked c
     // A mesh: two concentric icospheres, rays from outside, and rays through their vertices (where
     // several triangles are hit at once).
     auto const spheres = concatenate(canopy::make_icosphere(2, {0, 0, 0}, 1.0f), canopy::make_icosphere(2, {0, 0, 0}, 2.0f));
-    std::vector<ray> mesh_rays = random_rays(rng, canopy::build_binned_sah(spheres).bounds(), sized(200, 2000));
+    std::vector<ray> mesh_rays = random_rays(rng, build_bvh(spheres).bounds(), sized(200, 2000));
     for (vec3<float> const& v : features_of(spheres).vertices) mesh_rays.push_back({v * 2.5f, 0.0f, -v * 1.5f, inf});
     run(spheres, mesh_rays, "mesh");
 
@@ -1434,7 +1434,7 @@ TEST_CASE("rays spawned from hit points never hit the triangle they leave, for c
             }
             for (auto const* mesh : {&sphere, &grid}) {
                 bool const flat = mesh == &grid;
-                mesh_bvh const b = canopy::build_binned_sah(*mesh);
+                mesh_bvh const b = build_bvh(*mesh);
                 for (int i = 0; i < per_scale; ++i) {
                     triangle const& aim = (*mesh)[static_cast<std::size_t>(rng.integer(0, int(mesh->size()) - 1))];
                     vec3<float> const target = canopy::surface_point(aim, 0.3f, 0.3f) + rng.point(-0.1f, 0.1f) * scale;
@@ -1647,7 +1647,7 @@ TEST_CASE("rays from inside real closed meshes never miss (glmark2 bunny, CGAL s
         // parity must hit).
         REQUIRE(open_edges(s.mesh) == 0);
         std::vector<triangle> const tris = canopy::expand_indexed(s.mesh.vertices, s.mesh.faces);
-        mesh_bvh const b = canopy::build_binned_sah(tris);
+        mesh_bvh const b = build_bvh(tris);
         auto const points = interior_points(rng, tris, points_per_mesh);
         REQUIRE(static_cast<int>(points.size()) == points_per_mesh);
 
@@ -1678,7 +1678,7 @@ TEST_CASE("scaling the whole scene by 2^k gives the same triangles, u, v bit for
     random_source rng(1401);
     auto const mesh = concatenate(canopy::make_icosphere(3, {0, 0, 0}, 2.0f), triangle_soup(rng, 300, 4.0f, 1.0f));
     auto const rows = random_rotation_rows(rng);
-    auto const rays = random_rays(rng, canopy::build_binned_sah(mesh).bounds(), sized(300, 5000));
+    auto const rays = random_rays(rng, build_bvh(mesh).bounds(), sized(300, 5000));
     // Instances: identity, translated, rotated with a translation; all translations scale with the scene.
     std::array<transform, 3> const placements{
         transform::identity(), make_transform(no_rotation, {1, 1, 1}, {6.5f, -1.25f, 2.0f}),
@@ -1691,14 +1691,14 @@ TEST_CASE("scaling the whole scene by 2^k gives the same triangles, u, v bit for
         float const s = std::ldexp(1.0f, k);
         std::vector<triangle> scaled = mesh;
         for (triangle& t : scaled) t.v0 = t.v0 * s, t.v1 = t.v1 * s, t.v2 = t.v2 * s;
-        mesh_bvh const b = canopy::build_binned_sah(scaled);
+        mesh_bvh const b = build_bvh(scaled);
         std::vector<mesh_instance> instances;
         for (std::size_t i = 0; i < placements.size(); ++i) {
             transform m = placements[i];
             m.translation = m.translation * s;
             instances.emplace_back(b, m, static_cast<std::uint32_t>(i));
         }
-        instance_bvh const top = canopy::build_binned_sah(instances);
+        instance_bvh const top = build_bvh(instances);
         results out;
         for (ray r : rays) {
             r.origin = r.origin * s;
@@ -1742,7 +1742,7 @@ TEST_CASE("rotating the vertex order of every triangle keeps hits and prims, wit
         return tris;
     };
     auto const rotated1 = rotate(mesh), rotated2 = rotate(rotated1);
-    mesh_bvh const b = canopy::build_binned_sah(mesh), b1 = canopy::build_binned_sah(rotated1);
+    mesh_bvh const b = build_bvh(mesh), b1 = build_bvh(rotated1);
 
     // Rays: from inside the sphere at its vertices and edge midpoints, through the fan's vertices
     // and spokes exactly, and random.

@@ -3,8 +3,9 @@
 // The builder produces a binary BVH (nodes in one array, the two children of an inner node side
 // by side), then collapses it into an 8-wide BVH with the children's boxes stored as
 // structure-of-arrays, which is what traversal walks: one node fetch tests eight boxes at once
-// (Wald et al. 2008, "Getting Rid of Packets"; Embree's BVH8). Primitives are stored once,
-// reordered so that each leaf owns a contiguous range. Depth never exceeds bvh_max_depth (the
+// (Wald et al. 2008, "Getting Rid of Packets"; Embree's BVH8). Primitives are stored once (a
+// triangle of a build_quality::high BVH once per leaf holding it), reordered so that each leaf
+// owns a contiguous range. Depth never exceeds bvh_max_depth (the
 // builder enforces it), which bounds every traversal stack.
 module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
@@ -83,7 +84,7 @@ struct bvh {
     std::vector<wide_bvh_node<value_type>> wide_nodes; // the same tree, 8-wide; [0] is the root
     std::vector<Prim> primitives;   // in leaf order; empty when stores_triangle_blocks_v<Prim>
     std::vector<triangle_block> blocks; // stores_triangle_blocks_v<Prim>: the leaves' triangles
-    std::size_t size = 0;           // number of primitives
+    std::size_t size = 0;           // number of input primitives (leaves may hold more references: build_quality::high)
     int depth = 0;                  // number of node levels (a single leaf: 1)
 
     bool empty() const { return nodes.empty(); }
@@ -104,7 +105,9 @@ void for_each_leaf_primitive(bvh<Prim> const& b, std::uint32_t child, std::uint3
     }
 }
 
-// Calls f(primitive) once for each primitive of b, leaf by leaf.
+// Calls f(primitive) once for each primitive reference of b, leaf by leaf: once per primitive,
+// except in triangle BVHs built with spatial splits (build_quality::high), where a triangle is
+// visited once per leaf holding it.
 template <typename Prim, typename F>
 void for_each_primitive(bvh<Prim> const& b, F&& f) {
     for (auto const& n : b.nodes)
@@ -121,6 +124,28 @@ basic_aabb<bounds_value_t<Prim>> get_bounds(bvh<Prim> const& b) {
 struct sah_costs {
     float traversal = 1.0f;
     float intersection = 1.0f;
+};
+
+// How hard the builder works on triangle BVHs (other primitives are always built `fast`).
+//   fast  binned SAH over object splits (the default).
+//   high  spatial splits as well (canopy.bvh:spatial, Stich et al. 2009): a triangle whose box
+//         is much larger than itself (long thin triangles, slivers) may be referenced from
+//         several leaves, each bounding only its part. Builds take longer and use more memory.
+enum class build_quality { fast, high };
+
+// The builder's options, one aggregate with its defaults.
+struct bvh_build_options {
+    int max_leaf_size = 0;                    // primitives per leaf; 0: triangle_block_width for triangle BVHs, else 4
+    int bins = 16;                            // SAH bins per axis (2 … 256)
+    int max_depth = bvh_max_depth;            // clamped to [1, bvh_max_depth]
+    sah_costs costs = {};
+    std::size_t parallel_threshold = 4096;    // subtrees with more primitives become parallel tasks
+    build_quality quality = build_quality::fast;
+    // high: extra references spatial splits may add, as a fraction of the triangle count (≥ 0).
+    float split_budget = 0.3f;
+    // high: spatial splits are tried where the two sides of the best object split overlap by more
+    // than this fraction of the root's surface area (Stich et al.'s α).
+    float split_overlap = 1e-5f;
 };
 
 struct bvh_stats {

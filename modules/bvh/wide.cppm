@@ -13,10 +13,12 @@ module;
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <vector>
 export module canopy.bvh:wide;
 import canopy.geometry;
 import :storage;
+import :parallel;
 
 export namespace canopy {
 
@@ -120,5 +122,28 @@ void pack_triangle_blocks(bvh<Prim>& b) {
             if (node.count[k] != 0) node.child[k] = first_block[node.child[k]];
     b.primitives = {};
 }
+
+namespace detail {
+
+// The last steps of a build, once result.nodes holds the binary tree (leaves indexing `order`,
+// which gives the input index of the primitive at each leaf position; an index may appear more
+// than once, see canopy.bvh:spatial): the wide nodes, the primitives in leaf order with prim_id =
+// their input index, size = the input count, and the triangle blocks.
+template <typename Prim>
+void finish_build(bvh<Prim>& result, std::span<Prim const> prims, std::vector<std::uint32_t> const& order) {
+    result.wide_nodes = collapse_to_wide(result.nodes);
+    result.primitives.resize(order.size());
+    parallel_for_chunks(order.size(), 1024, [&](std::size_t first, std::size_t last) {
+        for (std::size_t i = first; i < last; ++i) {
+            result.primitives[i] = prims[order[i]];
+            if constexpr (requires(Prim& p) { p.prim_id = std::uint32_t(0); })
+                result.primitives[i].prim_id = order[i];
+        }
+    });
+    result.size = prims.size();
+    if constexpr (stores_triangle_blocks_v<Prim>) pack_triangle_blocks(result);
+}
+
+} // namespace detail
 
 } // namespace canopy

@@ -1,0 +1,155 @@
+// canopy.bvh:binning — the SAH bins shared by the builders (canopy.bvh:build, canopy.bvh:spatial):
+// bins of boxes along one axis, and the sweep that finds the cheapest boundary between them.
+module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
+#include <array>
+#include <cstddef>
+#include <limits>
+#include <vector>
+export module canopy.bvh:binning;
+import canopy.geometry;
+
+export namespace canopy::detail {
+
+template <typename S>
+struct bin {
+    basic_aabb<S> bounds;
+    std::size_t count = 0;
+};
+
+// Bin of a centroid coordinate; NaN and out-of-range values clamp into [0, bins).
+template <typename S>
+int bin_index(S x, S lo, S scale, int bins) {
+    S const f = (x - lo) * scale;
+    if (!(f >= S(0))) return 0;
+    if (!(f < S(bins))) return bins - 1;
+    return int(f);
+}
+
+// Per-task working memory of the binning: 3 · bins bins and one sweep array.
+template <typename S>
+struct bin_scratch {
+    explicit bin_scratch(int bins) : bins(3 * std::size_t(bins)), right_cost(std::size_t(bins)) {}
+    std::vector<bin<S>> bins;
+    std::vector<double> right_cost;
+};
+
+// Bounds of a range of primitives and of their centroids.
+template <typename S>
+struct range_bounds {
+    basic_aabb<S> bounds;
+    basic_aabb<S> centroids;
+};
+
+// Tests the SAH counts for a leaf of n primitives tested block_size at a time: ceil(n / block_size)
+// (triangle BVHs test blocks of triangles at once; Embree's builders count blocks the same way).
+inline double leaf_tests(std::size_t n, std::size_t block_size) { return double((n + block_size - 1) / block_size); }
+
+// The cheapest split found so far: bins [0, split) of `axis` go left. cost is the sum over both
+// sides of surface area × leaf_tests (no traversal term, not divided by the parent's area).
+struct split_choice {
+    double cost = std::numeric_limits<double>::infinity();
+    int axis = -1;
+    int split = 0;
+};
+
+// Sweeps the `bins` bins of one axis (holding `count` primitives in all) from the right, then
+// from the left, and keeps in `best` any boundary cheaper than it that leaves both sides
+// non-empty. right_cost: scratch of at least `bins` entries.
+template <typename S>
+void sweep_object_bins(bin<S> const* ab, int bins, std::size_t count, int axis, std::size_t block_size,
+                       std::vector<double>& right_cost, split_choice& best) {
+    basic_aabb<S> acc;
+    std::size_t n = 0;
+    for (int k = bins - 1; k > 0; --k) {
+        acc = extend(acc, ab[k].bounds);
+        n += ab[k].count;
+        right_cost[std::size_t(k)] = n ? double(surface_area(acc)) * leaf_tests(n, block_size) : 0.0;
+    }
+    acc = basic_aabb<S>{};
+    n = 0;
+    for (int k = 1; k < bins; ++k) {
+        acc = extend(acc, ab[k - 1].bounds);
+        n += ab[k - 1].count;
+        if (n == 0 || n == count) continue;
+        double const cost = double(surface_area(acc)) * leaf_tests(n, block_size) + right_cost[std::size_t(k)];
+        if (cost < best.cost) best = {cost, axis, k};
+    }
+}
+
+// The centroid bins of one node on all three axes: `bins` bins per axis across the centroids'
+// bounds (an axis along which all centroids coincide is not usable).
+template <typename S>
+struct centroid_bins {
+    inline centroid_bins(basic_aabb<S> const& centroids, int bins_) : bins(bins_) {
+        for (int axis = 0; axis < 3; ++axis) {
+            auto const a = std::size_t(axis);
+            lo[a] = centroids.min[axis];
+            S const extent = centroids.max[axis] - lo[a];
+            usable[a] = extent > S(0);
+            scale[a] = usable[a] ? S(bins) / extent : S(0);
+        }
+    }
+
+    // Clears the 3 · bins bins in use. Kept scalar: vectorised, the loop becomes AVX-512
+    // scatters, which cost more than the whole binning pass on some processors.
+    inline void clear(bin<S>* b) const {
+#pragma clang loop vectorize(disable)
+        for (std::size_t k = 0, used = 3 * std::size_t(bins); k < used; ++k) b[k] = bin<S>{};
+    }
+
+    [[gnu::always_inline]] inline int index(int axis, S x) const {
+        return bin_index(x, lo[std::size_t(axis)], scale[std::size_t(axis)], bins);
+    }
+
+    // Adds a primitive (its box, its centroid) to its bin on each usable axis.
+    [[gnu::always_inline]] inline void add(bin<S>* b, basic_aabb<S> const& box, vec3<S> const& c) const {
+        for (int axis = 0; axis < 3; ++axis) {
+            if (!usable[std::size_t(axis)]) continue;
+            auto& bb = b[std::size_t(axis * bins + index(axis, c[axis]))];
+            bb.bounds = extend(bb.bounds, box);
+            ++bb.count;
+        }
+    }
+
+    // The cheapest boundary over the usable axes of bins holding `count` primitives.
+    inline split_choice best_split(bin<S> const* b, std::size_t count, std::size_t block_size,
+                                   std::vector<double>& right_cost) const {
+        split_choice best;
+        for (int axis = 0; axis < 3; ++axis)
+            if (usable[std::size_t(axis)])
+                sweep_object_bins(b + axis * bins, bins, count, axis, block_size, right_cost, best);
+        return best;
+    }
+
+    // The bounds of the primitives on each side of `split` (the unions of their bins).
+    inline void side_bounds(bin<S> const* b, split_choice const& split, basic_aabb<S>& left,
+                            basic_aabb<S>& right) const {
+        auto const* ab = b + split.axis * bins;
+        for (int k = 0; k < bins; ++k) {
+            auto& side = k < split.split ? left : right;
+            side = extend(side, ab[k].bounds);
+        }
+    }
+
+    int bins;
+    std::array<S, 3> lo{}, scale{};
+    std::array<bool, 3> usable{};
+};
+
+// Whether a node of `count` primitives (parent_area its surface area) is better left a leaf than
+// split at `best` (best.axis < 0: no split was found). Nodes over max_leaf_size are always split.
+template <typename Options>
+bool leaf_is_cheaper(Options const& opt, std::size_t count, std::size_t block_size, double parent_area,
+                     split_choice const& best) {
+    double const leaf_cost = double(opt.costs.intersection) * leaf_tests(count, block_size);
+    double const split_cost = parent_area > 0.0
+                                  ? opt.costs.traversal + opt.costs.intersection * best.cost / parent_area
+                                  : opt.costs.traversal + leaf_cost;
+    bool const fits_leaf = count <= std::size_t(opt.max_leaf_size);
+    return fits_leaf && (best.axis < 0 || split_cost >= leaf_cost);
+}
+
+} // namespace canopy::detail

@@ -1,0 +1,434 @@
+// canopy.bvh:spatial — the `high` quality builder of triangle BVHs (build_quality::high): a split
+// BVH (Stich, Friedrich, Dietrich 2009, "Spatial Splits in Bounding Volume Hierarchies").
+//
+// Each node weighs the best binned object split (the bins of canopy.bvh:build) against the best
+// binned spatial split: planes at equal intervals across the node's box, each triangle reference
+// clipped to the bins it crosses. A reference that straddles the chosen plane goes to both sides,
+// each copy with the box of its triangle's part on that side, unless keeping it whole on one side
+// is cheaper by the SAH (Stich et al.'s reference unsplitting). Spatial splits are tried only
+// where the two sides of the best object split overlap by more than split_overlap of the root's
+// surface area, and add at most split_budget × n references in all: each node's share of the
+// budget goes to its children in proportion to their references, so the tree does not depend on
+// how threads are scheduled.
+//
+// Guarantees:
+// - every input triangle is referenced by one leaf or more, never twice by one leaf;
+// - leaves store the whole triangle as given, prim_id = its input index, never a clipped piece;
+// - a reference's box contains the exact part of its triangle inside the region left by the
+//   split planes above it (the clipping is computed in double and rounded outward), so the boxes
+//   of a triangle's references cover it. Traversal stays conservative for the watertight test: the
+//   box margin of canopy.geometry:box grows every box by the same absolute amount, and a point
+//   within that margin of the triangle is within it of the box of the part holding the nearest
+//   point of the triangle;
+// - triangles with a NaN or infinite coordinate are never split (nodes holding one make object
+//   splits only).
+// A ray may therefore meet one triangle in several leaves: the queries report it once (the same
+// triangle gives the same hit, bit for bit), but a triangle hook or a filter may see it once per
+// leaf (see canopy.intersector).
+module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
+#include <algorithm>
+#include <bit>
+#include <atomic>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <type_traits>
+#include <utility>
+#include <vector>
+export module canopy.bvh:spatial;
+import canopy.geometry;
+import :storage;
+import :parallel;
+import :wide;
+import :binning;
+
+export namespace canopy::detail {
+
+// The primitive types spatial splits apply to.
+template <typename Prim>
+inline constexpr bool splittable_triangle = std::is_same_v<Prim, basic_triangle<float>> ||
+                                            std::is_same_v<Prim, basic_triangle<double>>;
+
+// x rounded to S towards -inf (round_down) or +inf (round_up). The neighbouring float is a step
+// of the bit pattern (std::nextafter is a library call, and this runs once per clipped box).
+template <typename S>
+S next_float(S f, bool up) {
+    using bits_type = std::conditional_t<sizeof(S) == 4, std::uint32_t, std::uint64_t>;
+    if (std::isnan(f) || f == (up ? std::numeric_limits<S>::infinity() : -std::numeric_limits<S>::infinity())) return f;
+    if (f == S(0)) return up ? std::numeric_limits<S>::denorm_min() : -std::numeric_limits<S>::denorm_min();
+    auto const b = std::bit_cast<bits_type>(f);
+    return std::bit_cast<S>((f > S(0)) == up ? bits_type(b + 1) : bits_type(b - 1));
+}
+template <typename S>
+S round_down(double x) {
+    S const f = S(x);
+    return double(f) > x ? next_float(f, false) : f;
+}
+template <typename S>
+S round_up(double x) {
+    S const f = S(x);
+    return double(f) < x ? next_float(f, true) : f;
+}
+
+// The boxes of the parts of `tri` on either side of the plane p[axis] = position (closed half
+// spaces: a point on the plane belongs to both), each rounded outward and intersected with
+// `within` (taken by value: it may be left or right); a side without any part of the triangle gets an empty box. Each part is a polygon
+// whose corners are the triangle's vertices on that side and the points where its edges cross the
+// plane. A crossing is computed in double with an error below 12 · 2^-53 of the edge's largest
+// coordinate; it is widened by 2^-48 of that, clamped to the edge's extent (where the exact
+// crossing lies; a NaN from an overflow falls back to it), then rounded outward with the rest.
+// Exact = false (the estimates of the binning): no widening, rounded to nearest.
+template <bool Exact, typename S>
+void split_box(basic_triangle<S> const& tri, int axis, S position, basic_aabb<S> const within, basic_aabb<S>& left,
+               basic_aabb<S>& right) {
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    vec3<S> const v[3] = {tri.v0, tri.v1, tri.v2};
+    // low / high per side (0 left, 1 right) and coordinate, in double.
+    double low[2][3] = {{inf, inf, inf}, {inf, inf, inf}}, high[2][3] = {{-inf, -inf, -inf}, {-inf, -inf, -inf}};
+    auto const take = [&](int side, int c, double a, double b) {
+        auto const s = std::size_t(side), k = std::size_t(c);
+        low[s][k] = std::min(low[s][k], a);
+        high[s][k] = std::max(high[s][k], b);
+    };
+    for (int i = 0; i < 3; ++i) {
+        vec3<S> const& p = v[i];
+        vec3<S> const& q = v[(i + 1) % 3];
+        for (int side = 0; side < 2; ++side)
+            if (side == 0 ? p[axis] <= position : p[axis] >= position)
+                for (int c = 0; c < 3; ++c) take(side, c, double(p[c]), double(p[c]));
+        if (!((p[axis] < position && position < q[axis]) || (q[axis] < position && position < p[axis]))) continue;
+        double const f = (double(position) - double(p[axis])) / (double(q[axis]) - double(p[axis]));
+        for (int c = 0; c < 3; ++c) {
+            double a = double(position), b = a;
+            if (c != axis) {
+                double const pc = double(p[c]), qc = double(q[c]);
+                double const x = pc + (qc - pc) * f;
+                double const margin = Exact ? std::max(std::fabs(pc), std::fabs(qc)) * 0x1p-48 : 0.0;
+                a = x - margin > std::min(pc, qc) ? x - margin : std::min(pc, qc);
+                b = x + margin < std::max(pc, qc) ? x + margin : std::max(pc, qc);
+            }
+            take(0, c, a, b);
+            take(1, c, a, b);
+        }
+    }
+    for (int side = 0; side < 2; ++side) {
+        auto const s = std::size_t(side);
+        basic_aabb<S>& box = side == 0 ? left : right;
+        box = {};
+        for (int c = 0; c < 3; ++c) {
+            auto const k = std::size_t(c);
+            S const lo = std::max(Exact ? round_down<S>(low[s][k]) : S(low[s][k]), within.min[c]);
+            S const hi = std::min(Exact ? round_up<S>(high[s][k]) : S(high[s][k]), within.max[c]);
+            if (!(lo <= hi)) {
+                box = {};
+                break;
+            }
+            box.min[c] = lo;
+            box.max[c] = hi;
+        }
+    }
+}
+
+// A reference to input triangle `prim`, bounded by `box` (the whole triangle's box, or a part's).
+template <typename S>
+struct split_reference {
+    basic_aabb<S> box;
+    std::uint32_t prim;
+};
+
+template <typename S>
+using reference_list = std::vector<split_reference<S>>;
+
+template <typename Prim>
+struct spatial_context {
+    using S = typename Prim::value_type;
+    std::span<Prim const> prims;
+    std::vector<std::uint32_t> order; // the triangle of each leaf position, order_count of them used
+    std::atomic<std::uint32_t> order_count{0};
+    std::vector<bvh_node<S>>* nodes = nullptr;
+    std::atomic<std::uint32_t> node_count{1};
+    std::atomic<int> depth{0};
+    bvh_build_options options;
+    std::size_t block_size = 1;
+    double min_overlap = 0.0; // split_overlap × the root's surface area
+};
+
+// Per-task working memory: the object bins, and per axis the spatial bins (boxes, references
+// entering and leaving each bin), their planes and the sweep's right sides.
+template <typename S>
+struct spatial_scratch {
+    explicit spatial_scratch(int bins)
+        : object(bins), boxes(std::size_t(bins)), enter(std::size_t(bins)), exit(std::size_t(bins)),
+          planes(std::size_t(bins) + 1), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)) {}
+    bin_scratch<S> object;
+    std::vector<basic_aabb<S>> boxes;
+    std::vector<std::size_t> enter, exit;
+    std::vector<S> planes;
+    std::vector<basic_aabb<S>> right_boxes;
+    std::vector<std::size_t> right_counts;
+};
+
+// The best spatial split: references left of `position` go left, right of it right, those that
+// straddle it both ways. left_count / right_count / left_box / right_box are the binned estimates.
+template <typename S>
+struct spatial_choice {
+    double cost = std::numeric_limits<double>::infinity();
+    int axis = -1;
+    S position = S(0);
+    std::size_t left_count = 0, right_count = 0;
+    basic_aabb<S> left_box, right_box;
+};
+
+// The bin k of x among the planes (planes[k] ≤ x < planes[k + 1]; clamped to [0, bins)).
+template <typename S>
+int plane_bin(S x, S const* planes, int bins, S scale) {
+    int k = bin_index(x, planes[0], scale, bins);
+    while (k > 0 && x < planes[k]) --k;
+    while (k + 1 < bins && x >= planes[k + 1]) ++k;
+    return k;
+}
+
+template <typename Prim, typename S>
+spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_scratch<S>& scratch,
+                                     reference_list<S> const& refs, basic_aabb<S> const& bounds, int bins) {
+    spatial_choice<S> best;
+    auto const b = std::size_t(bins);
+    for (int axis = 0; axis < 3; ++axis) {
+        S const lo = bounds.min[axis], hi = bounds.max[axis];
+        if (!(hi > lo)) continue;
+        S* const planes = scratch.planes.data();
+        for (std::size_t k = 0; k < b; ++k)
+            planes[k] = S(double(lo) + (double(hi) - double(lo)) * double(k) / double(bins));
+        planes[b] = hi;
+        S const scale = S(bins) / (hi - lo);
+        std::fill(scratch.boxes.begin(), scratch.boxes.end(), basic_aabb<S>{});
+        std::fill(scratch.enter.begin(), scratch.enter.end(), std::size_t(0));
+        std::fill(scratch.exit.begin(), scratch.exit.end(), std::size_t(0));
+        for (auto const& r : refs) {
+            int const first = plane_bin(r.box.min[axis], planes, bins, scale);
+            int const last = plane_bin(r.box.max[axis], planes, bins, scale);
+            ++scratch.enter[std::size_t(first)];
+            ++scratch.exit[std::size_t(last)];
+            if (first == last) {
+                scratch.boxes[std::size_t(first)] = extend(scratch.boxes[std::size_t(first)], r.box);
+                continue;
+            }
+            // Cut off one bin after the other: `rest` bounds the part right of the bins done (an
+            // estimate: the references that a split duplicates are clipped exactly).
+            auto const& tri = ctx.prims[r.prim];
+            basic_aabb<S> rest = r.box, part;
+            for (int k = first; k < last; ++k) {
+                split_box<false>(tri, axis, planes[k + 1], rest, part, rest);
+                scratch.boxes[std::size_t(k)] = extend(scratch.boxes[std::size_t(k)], part);
+            }
+            scratch.boxes[std::size_t(last)] = extend(scratch.boxes[std::size_t(last)], rest);
+        }
+        // From the right: the references leaving bins ≥ k; then from the left: those entering
+        // bins < k. Plane k splits there.
+        basic_aabb<S> acc;
+        std::size_t n = 0;
+        for (std::size_t k = b - 1; k > 0; --k) {
+            acc = extend(acc, scratch.boxes[k]);
+            n += scratch.exit[k];
+            scratch.right_boxes[k] = acc;
+            scratch.right_counts[k] = n;
+        }
+        acc = basic_aabb<S>{};
+        n = 0;
+        for (std::size_t k = 1; k < b; ++k) {
+            acc = extend(acc, scratch.boxes[k - 1]);
+            n += scratch.enter[k - 1];
+            std::size_t const right = scratch.right_counts[k];
+            if (n == 0 || right == 0 || !(planes[k] > lo && planes[k] < hi)) continue;
+            double const cost = double(surface_area(acc)) * leaf_tests(n, ctx.block_size) +
+                                double(surface_area(scratch.right_boxes[k])) * leaf_tests(right, ctx.block_size);
+            if (cost < best.cost)
+                best = {cost, axis, planes[k], n, right, acc, scratch.right_boxes[k]};
+        }
+    }
+    return best;
+}
+
+// Moves refs to the two sides of plane `split.position`, clipping the references that straddle it
+// (at most `budget` of them are duplicated). Returns the number of duplicates.
+template <typename Prim, typename S>
+std::size_t partition_spatial(spatial_context<Prim> const& ctx, reference_list<S> const& refs,
+                              spatial_choice<S> const& split, std::size_t budget, reference_list<S>& left,
+                              reference_list<S>& right) {
+    int const axis = split.axis;
+    S const position = split.position;
+    // The unsplitting test counts references one by one, as Stich et al. do.
+    double const left_area = double(surface_area(split.left_box)), right_area = double(surface_area(split.right_box));
+    double left_count = double(split.left_count), right_count = double(split.right_count);
+    std::size_t duplicates = 0;
+    for (auto const& r : refs) {
+        if (r.box.max[axis] <= position) {
+            left.push_back(r);
+            continue;
+        }
+        if (r.box.min[axis] >= position) {
+            right.push_back(r);
+            continue;
+        }
+        basic_aabb<S> left_part, right_part;
+        split_box<true>(ctx.prims[r.prim], axis, position, r.box, left_part, right_part);
+        if (is_empty(left_part)) {
+            right.push_back({right_part, r.prim});
+            continue;
+        }
+        if (is_empty(right_part)) {
+            left.push_back({left_part, r.prim});
+            continue;
+        }
+        double const both = left_area * left_count + right_area * right_count;
+        double const all_left = double(surface_area(extend(split.left_box, r.box))) * left_count +
+                                right_area * (right_count - 1.0);
+        double const all_right = left_area * (left_count - 1.0) +
+                                 double(surface_area(extend(split.right_box, r.box))) * right_count;
+        if (duplicates < budget && both <= all_left && both <= all_right) {
+            left.push_back({left_part, r.prim});
+            right.push_back({right_part, r.prim});
+            ++duplicates;
+        } else if (all_left <= all_right) {
+            left.push_back(r);
+            right_count -= 1.0;
+        } else {
+            right.push_back(r);
+            left_count -= 1.0;
+        }
+    }
+    return duplicates;
+}
+
+// Builds the subtree of `refs` into nodes[node_index], adding at most `budget` references.
+template <typename Prim, typename S>
+void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch, std::uint32_t node_index,
+                        reference_list<S> refs, int depth, std::size_t budget) {
+    auto& nodes = *ctx.nodes;
+    auto const& opt = ctx.options;
+    std::size_t const count = refs.size();
+    range_bounds<S> range;
+    bool finite = true;
+    for (auto const& r : refs) {
+        range.bounds = extend(range.bounds, r.box);
+        range.centroids = extend(range.centroids, center(r.box));
+        for (int c = 0; c < 3; ++c) finite = finite && std::isfinite(r.box.min[c]) && std::isfinite(r.box.max[c]);
+    }
+    nodes[node_index].bounds = range.bounds;
+
+    int prev = ctx.depth.load(std::memory_order_relaxed);
+    while (prev < depth + 1 && !ctx.depth.compare_exchange_weak(prev, depth + 1)) {}
+
+    auto make_leaf = [&] {
+        std::uint32_t const first = ctx.order_count.fetch_add(std::uint32_t(count), std::memory_order_relaxed);
+        for (std::size_t i = 0; i < count; ++i) ctx.order[first + i] = refs[i].prim;
+        nodes[node_index].index = first;
+        nodes[node_index].count = std::uint32_t(count);
+    };
+    if (count == 1 || depth + 1 >= opt.max_depth) return make_leaf();
+
+    int const bins = int(std::min<std::size_t>(std::size_t(opt.bins), std::max<std::size_t>(count, 2)));
+    centroid_bins<S> const binning(range.centroids, bins);
+    bin<S>* const bin_data = scratch.object.bins.data();
+    binning.clear(bin_data);
+    for (auto const& r : refs) binning.add(bin_data, r.box, center(r.box));
+    split_choice best = binning.best_split(bin_data, count, ctx.block_size, scratch.object.right_cost);
+
+    spatial_choice<S> spatial;
+    if (budget > 0 && finite && best.axis >= 0) {
+        basic_aabb<S> left, right;
+        binning.side_bounds(bin_data, best, left, right);
+        if (double(surface_area(intersection(left, right))) > ctx.min_overlap)
+            spatial = find_spatial_split(ctx, scratch, refs, range.bounds, opt.bins);
+    }
+    // A split that would duplicate more references than the budget allows keeps the rest whole
+    // on their cheaper side (partition_spatial).
+    bool use_spatial = spatial.axis >= 0 && spatial.cost < best.cost;
+    if (use_spatial) best = {spatial.cost, spatial.axis, 0};
+    if (leaf_is_cheaper(opt, count, ctx.block_size, double(surface_area(range.bounds)), best)) return make_leaf();
+
+    reference_list<S> left, right;
+    std::size_t duplicates = 0;
+    if (use_spatial) {
+        duplicates = partition_spatial(ctx, refs, spatial, budget, left, right);
+        if (left.empty() || right.empty()) {
+            // Every straddling reference had its triangle on one side: split by objects instead.
+            left.clear();
+            right.clear();
+            duplicates = 0;
+            use_spatial = false;
+            best = binning.best_split(bin_data, count, ctx.block_size, scratch.object.right_cost);
+        }
+    }
+    if (!use_spatial) {
+        if (best.axis >= 0) {
+            for (auto const& r : refs)
+                (binning.index(best.axis, center(r.box)[best.axis]) < best.split ? left : right).push_back(r);
+        } else {
+            left.assign(refs.begin(), refs.begin() + std::ptrdiff_t(count / 2));
+            right.assign(refs.begin() + std::ptrdiff_t(count / 2), refs.end());
+        }
+    }
+    refs = {};
+
+    // The rest of the budget, shared by the children's reference counts.
+    std::size_t const rest = budget - duplicates;
+    std::size_t const left_budget = std::size_t(double(rest) * double(left.size()) / double(left.size() + right.size()));
+    std::size_t const right_budget = rest - left_budget;
+    std::uint32_t const children = ctx.node_count.fetch_add(2, std::memory_order_relaxed);
+    nodes[node_index].index = children;
+    nodes[node_index].count = 0;
+    if (count >= opt.parallel_threshold) {
+        parallel_invoke(
+            [&] {
+                spatial_scratch<S> own(opt.bins);
+                build_spatial_node(ctx, own, children, std::move(left), depth + 1, left_budget);
+            },
+            [&] { build_spatial_node(ctx, scratch, children + 1, std::move(right), depth + 1, right_budget); });
+    } else {
+        build_spatial_node(ctx, scratch, children, std::move(left), depth + 1, left_budget);
+        build_spatial_node(ctx, scratch, children + 1, std::move(right), depth + 1, right_budget);
+    }
+}
+
+// The split BVH of prims (options already checked by build_binned_sah; prims not empty).
+template <typename Prim>
+    requires splittable_triangle<Prim>
+bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options const& options) {
+    using S = typename Prim::value_type;
+    bvh<Prim> result;
+    std::size_t const n = prims.size();
+    double const fraction = std::isfinite(options.split_budget) ? std::max(0.0, double(options.split_budget)) : 0.0;
+    // References are numbered in 32 bits, as primitives are.
+    auto const budget = std::size_t(std::min(double(n) * fraction, double(std::numeric_limits<std::uint32_t>::max() / 2) - double(n)));
+
+    spatial_context<Prim> ctx;
+    ctx.prims = prims;
+    ctx.options = options;
+    if constexpr (stores_triangle_blocks_v<Prim>) ctx.block_size = triangle_block_width;
+    reference_list<S> refs(n);
+    parallel_for_chunks(n, 1024, [&](std::size_t first, std::size_t last) {
+        for (std::size_t i = first; i < last; ++i) refs[i] = {get_bounds(prims[i]), std::uint32_t(i)};
+    });
+    basic_aabb<S> root;
+    for (auto const& r : refs) root = extend(root, r.box);
+    double const overlap = std::isfinite(options.split_overlap) ? std::max(0.0, double(options.split_overlap)) : 0.0;
+    ctx.min_overlap = overlap * double(surface_area(root));
+    ctx.order.resize(n + budget);
+    result.nodes.resize(2 * (n + budget) - 1);
+    ctx.nodes = &result.nodes;
+    spatial_scratch<S> scratch(options.bins);
+    build_spatial_node(ctx, scratch, 0, std::move(refs), 0, budget);
+    result.nodes.resize(ctx.node_count.load());
+    result.depth = ctx.depth.load();
+    ctx.order.resize(ctx.order_count.load());
+    finish_build(result, prims, ctx.order);
+    return result;
+}
+
+} // namespace canopy::detail
