@@ -169,6 +169,7 @@ std::unique_ptr<embree_scene> build_embree(RTCDevice device, bench_scene const& 
     if (quality == canopy::build_quality::high) {
         rtcSetSceneBuildQuality(s->mesh, RTC_BUILD_QUALITY_HIGH);
         rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
+        rtcCommitGeometry(geom); // a changed geometry counts only once committed again
     }
     rtcAttachGeometry(s->mesh, geom);
     rtcReleaseGeometry(geom);
