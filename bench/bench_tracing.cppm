@@ -44,10 +44,11 @@ std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in, bvh_build_opti
     return s;
 }
 
-// "fast" or "high" → the build quality; false for another name.
+// "fast", "high" or "automatic" → the build quality; false for another name.
 inline bool parse_quality(std::string const& name, build_quality& quality) {
     if (name == "fast") quality = build_quality::fast;
     else if (name == "high") quality = build_quality::high;
+    else if (name == "automatic") quality = build_quality::automatic;
     else return false;
     return true;
 }

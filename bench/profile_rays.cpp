@@ -2,7 +2,7 @@
 // callgrind counts instructions per ray (bench/profile.sh), perf samples where the time goes.
 //
 //   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]
-//                        [--quality fast|high] [--split-budget F]
+//                        [--quality automatic|fast|high] [--split-budget F]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow        QUERY  closest | any
 //
@@ -14,6 +14,7 @@
 // cost and its build time.
 #include <algorithm>
 #include <chrono>
+#include <span>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -33,7 +34,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality fast|high] [--split-budget F]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F]\n",
                  program);
     return 2;
 }
@@ -85,6 +86,8 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "%s: %s\n", scene_name.c_str(), scene.skipped.c_str());
         return 1;
     }
+    std::printf("sliver box share %.3f (build_quality::automatic builds high from 0.05)\n",
+                canopy::sliver_box_share(std::span<canopy::triangle const>(scene.mesh)));
     auto const build_start = std::chrono::steady_clock::now();
     auto const s = build_canopy(scene, options);
     double const build_ms =
@@ -94,7 +97,7 @@ int main(int argc, char** argv) {
     for (auto const& n : s->mesh.nodes) references += n.is_leaf() ? n.count : 0;
     std::printf("mesh BVH (%s): %zu triangles, %zu references, %zu leaves (%.2f references each), %zu wide nodes, "
                 "%zu blocks, depth %d, SAH %.2f, %.1f bytes/triangle, built in %.0f ms\n",
-                options.quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,
+                s->mesh.quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,
                 st.leaf_count, double(references) / double(st.leaf_count), st.wide_node_count,
                 s->mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive, build_ms);
     auto sets = make_rays(*s, s->instanced ? s->top.bounds() : s->mesh.bounds());

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <span>
 #include <vector>
 
 import canopy.query;
@@ -595,4 +596,45 @@ TEST_CASE("build_quality::high keeps max_depth, and never splits triangles with 
     CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n >= 1; }));
     CHECK(seen[finite] == 1);
     CHECK(seen[finite + 1] == 1);
+}
+
+TEST_CASE("build_quality::automatic: the sliver box share, by hand, and the quality it picks") {
+    using canopy::build_quality;
+    // A right triangle in the plane z = 0 with legs a and b along x and y: box half-area a·b,
+    // area a·b/2 (ratio 2, not a sliver). A needle from the origin to (L, L, 0) and (L, L + w, 0):
+    // box half-area L·(L + w), area L·w/2 (ratio 2(L + w)/w, a sliver for w ≪ L).
+    triangle const right{{0, 0, 0}, {4, 0, 0}, {0, 2, 0}, 0, 0};   // half-area 8
+    triangle const needle{{0, 0, 0}, {8, 8, 0}, {8, 8.0625f, 0}, 1, 0}; // half-area 8 · 8.0625 = 64.5, area 0.25
+    std::vector<triangle> const mixed{right, needle};
+    CHECK(canopy::sliver_box_share(std::span<triangle const>(std::vector<triangle>{right})) == 0.0);
+    CHECK(canopy::sliver_box_share(std::span<triangle const>(std::vector<triangle>{needle})) == 1.0);
+    CHECK(canopy::sliver_box_share(std::span<triangle const>(mixed)) == Approx(64.5 / (64.5 + 8.0)).epsilon(1e-12));
+    CHECK(canopy::spatial_splits_pay(std::span<triangle const>(mixed)));
+    // Degenerate and non-finite triangles do not count against a mesh: a zero-area triangle with a
+    // zero-area box adds nothing, a NaN one is skipped.
+    triangle const point{{1, 1, 1}, {1, 1, 1}, {1, 1, 1}, 2, 0};
+    float const nan = std::numeric_limits<float>::quiet_NaN();
+    triangle const broken{{nan, 0, 0}, {1, 0, 0}, {0, 1, 0}, 3, 0};
+    CHECK(canopy::sliver_box_share(std::span<triangle const>(std::vector<triangle>{right, point, broken})) == 0.0);
+
+    // The default is automatic: well-shaped triangles build fast, slivers build high, and both
+    // say so; explicit qualities are kept.
+    random_source rng(77);
+    std::vector<triangle> blobs, slivers;
+    for (std::uint32_t i = 0; i < 2000; ++i) {
+        vec3<float> const c = rng.point(-50, 50);
+        blobs.push_back({c, c + vec3<float>(1, 0, 0.2f), c + vec3<float>(0.1f, 1, 0), i, 0});
+        vec3<float> const d = rng.point(-1, 1) * 40.0f;
+        slivers.push_back({c, c + d, c + d + vec3<float>(0, 0, 0.01f), i, 0});
+    }
+    CHECK(canopy::bvh_build_options{}.quality == build_quality::automatic);
+    CHECK(canopy::build_binned_sah(blobs).quality == build_quality::fast);
+    CHECK(canopy::build_binned_sah(slivers).quality == build_quality::high);
+    CHECK(canopy::build_binned_sah(slivers, {.quality = build_quality::fast}).quality == build_quality::fast);
+    CHECK(canopy::build_binned_sah(blobs, {.quality = build_quality::high}).quality == build_quality::high);
+    // The automatic build of the slivers is the high build, node for node.
+    auto const automatic = canopy::build_binned_sah(slivers);
+    auto const high = canopy::build_binned_sah(slivers, {.quality = build_quality::high});
+    CHECK(automatic.nodes.size() == high.nodes.size());
+    CHECK(canopy::compute_stats(automatic).sah_cost == canopy::compute_stats(high).sah_cost);
 }

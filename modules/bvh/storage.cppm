@@ -73,6 +73,16 @@ struct alignas(64) wide_bvh_node {
 template <typename Prim>
 inline constexpr bool stores_triangle_blocks_v = std::is_same_v<Prim, triangle>;
 
+// How hard the builder works on triangle BVHs (other primitives are always built `fast`).
+//   fast  binned SAH over object splits.
+//   high  spatial splits as well (canopy.bvh:spatial, Stich et al. 2009): a triangle whose box
+//         is much larger than itself (long thin triangles, slivers) may be referenced from
+//         several leaves, each bounding only its part. Builds take longer and use more memory.
+//   automatic  high where spatial splits pay, by a cheap measure of the triangles
+//         (spatial_splits_pay in canopy.bvh:build: long thin triangles hold a large share of
+//         the boxes' area), else fast: the default. bvh::quality says which one a build used.
+enum class build_quality { fast, high, automatic };
+
 template <typename Prim>
 struct bvh {
     using primitive_type = Prim;
@@ -86,6 +96,7 @@ struct bvh {
     std::vector<triangle_block> blocks; // stores_triangle_blocks_v<Prim>: the leaves' triangles
     std::size_t size = 0;           // number of input primitives (leaves may hold more references: build_quality::high)
     int depth = 0;                  // number of node levels (a single leaf: 1)
+    build_quality quality = build_quality::fast; // how it was built (fast or high, automatic resolved)
 
     bool empty() const { return nodes.empty(); }
     std::size_t primitive_count() const { return size; }
@@ -126,12 +137,6 @@ struct sah_costs {
     float intersection = 1.0f;
 };
 
-// How hard the builder works on triangle BVHs (other primitives are always built `fast`).
-//   fast  binned SAH over object splits (the default).
-//   high  spatial splits as well (canopy.bvh:spatial, Stich et al. 2009): a triangle whose box
-//         is much larger than itself (long thin triangles, slivers) may be referenced from
-//         several leaves, each bounding only its part. Builds take longer and use more memory.
-enum class build_quality { fast, high };
 
 // The builder's options, one aggregate with its defaults.
 struct bvh_build_options {
@@ -140,7 +145,7 @@ struct bvh_build_options {
     int max_depth = bvh_max_depth;            // clamped to [1, bvh_max_depth]
     sah_costs costs = {};
     std::size_t parallel_threshold = 4096;    // subtrees with more primitives become parallel tasks
-    build_quality quality = build_quality::fast;
+    build_quality quality = build_quality::automatic;
     // high: extra references spatial splits may add, as a fraction of the triangle count (≥ 0).
     float split_budget = 0.3f;
     // high: spatial splits are tried where the two sides of the best object split overlap by more
