@@ -60,8 +60,9 @@
 // - BVHs built with spatial splits (build_quality::high, canopy.bvh:spatial) may hold one triangle
 //   in several leaves. The queries still report it once per ray, but a triangle hook and a filter
 //   are then called at least once for each triangle a ray meets, possibly once per leaf holding
-//   it (each time with the same triangle and the same candidate). With build_quality::fast (the
-//   default) every triangle is in one leaf.
+//   it (each time with the same triangle and the same candidate). The default,
+//   build_quality::automatic, builds that way only meshes of long thin triangles (bvh::quality
+//   says); with build_quality::fast every triangle is in one leaf.
 module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
 // every path (scalar, SIMD, packet) rounds the same way.

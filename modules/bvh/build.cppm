@@ -4,7 +4,8 @@
 //
 // bvh_build_options::quality = build_quality::high hands triangle BVHs to the split-BVH builder
 // (canopy.bvh:spatial), where a triangle may be referenced from several leaves; the rest of this
-// comment is about the default, build_quality::fast.
+// comment is about build_quality::fast (what build_quality::automatic, the default, runs unless
+// spatial_splits_pay says otherwise).
 //
 // Contract: every input primitive appears exactly once in the result; a primitive type with a
 // `prim_id` member gets prim_id = its index in the input sequence. Leaves hold at most
