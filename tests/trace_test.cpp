@@ -1190,10 +1190,8 @@ TEST_CASE("canopy trace --quality high gives the hits of the library's fast buil
         {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "closest", "--out", (f.folder.path / "x.hits").string(),
           "--quality", "best"},
          "--quality must be fast or high, not 'best'"},
-        {{"info", "x.json", "--quality", "medium"}, "--quality must be fast or high, not 'medium'"},
         {{"render", "--quality", "high"}, "--quality applies to a SCENE: the demo scene is built at quality fast"},
         {{"info", "--plugins", "--quality", "high"}, "--quality applies to a SCENE, not to --plugins"},
-        {{"render", "x.json", "--quality", "fast", "--quality", "high"}, "option --quality given more than once"},
     });
 }
 
