@@ -1133,31 +1133,13 @@ TEST_CASE("a top level refitted over refitted instances equals a fresh two-level
             auto const fresh_instances = instances_of(fresh);
             two_level const fresh_top = canopy::build_binned_sah(fresh_instances);
 
-            // World-space reference: each instance's triangles hit by the ray taken into object
-            // space the way traversal takes it.
-            auto const brute_force = [&](ray const& r) {
-                std::vector<record> hits;
-                for (auto const& inst : instances) {
-                    ray local = r;
-                    local.origin = inst.world_to_object.transform_point(r.origin);
-                    local.direction = inst.world_to_object.transform_vector(r.direction);
-                    for (auto const& t : moved) {
-                        auto hr = canopy::intersect(local, t);
-                        if (!hr.hit) continue;
-                        hr.inst_id = inst.inst_id;
-                        hits.push_back(hr);
-                    }
-                }
-                std::sort(hits.begin(), hits.end(), [](auto const& a, auto const& b) { return reference_precedes(a, b); });
-                return hits;
-            };
             std::vector<vec3<float>> targets;
             for (auto const& inst : instances)
                 for (std::size_t i = 0; i < moved.size(); i += 40) targets.push_back(inst.object_to_world.transform_point(moved[i].v0));
             query_agreement agreement;
             int fresh_mismatches = 0;
             for (ray const& r : rays_towards(rng, fresh_top.bounds(), targets, 250)) {
-                auto const expected = brute_force(r);
+                auto const expected = test_support::instanced_brute_force_hits(r, instances, moved);
                 compare_queries(r, &top, &top + 1, expected, [] { return canopy::default_intersector{}; }, agreement);
                 compare_trees(r, top, fresh_top, fresh_mismatches);
             }
