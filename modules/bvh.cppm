@@ -1,7 +1,7 @@
 // canopy.bvh — bounding volume hierarchies over any primitive with get_bounds/intersect, built
 // by a parallel binned SAH builder, traversed with a custom intersector; instance<BVH> places a
 // shared BVH with an affine transform, and BVHs of instances nest to any depth
-// (bvh<instance<bvh<instance<bvh<triangle>>>>>).
+// (bvh<instance<bvh<instance<bvh<triangle>>>>>); refit updates a BVH's boxes after its geometry moved.
 export module canopy.bvh;
 export import canopy.intersector;
 export import :storage;
@@ -12,3 +12,4 @@ export import :spatial;
 export import :build;
 export import :traverse;
 export import :instance;
+export import :refit;

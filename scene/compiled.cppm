@@ -15,6 +15,7 @@
 module;
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <optional>
@@ -41,6 +42,7 @@ struct compiled_mesh {
     std::vector<std::array<vec2<float>, 3>> uvs;    // per triangle, or empty
     int material = 0;
     bvh<triangle> accel;
+    double build_seconds = 0.0;                     // the time build() took to build accel
 };
 
 // What compile() did (all zero for scenes assembled by hand). decisions: one line per rule
@@ -71,6 +73,8 @@ struct compile_statistics {
     int levels = 0;
     bool alpha_mask_needed = false;
     double build_seconds = 0.0;
+    build_quality quality = build_quality::automatic; // asked for the mesh BVHs (compile_options::bvh.quality); each compiled_mesh's accel.quality says what it used
+    double mesh_build_seconds = 0.0;              // building the mesh BVHs, the sum of compiled_mesh::build_seconds
     std::vector<std::string> decisions;
 };
 
@@ -134,15 +138,18 @@ struct compiled_scene {
         top_meshes.push_back({m, xf, invalid_id});
     }
 
-    // Builds every mesh BVH, then the groups, then the top level. Meshes and groups must not be
-    // added afterwards: instances point at their BVHs.
+    // Builds every mesh BVH (each timed in compiled_mesh::build_seconds), then the groups, then
+    // the top level. Meshes and groups must not be added afterwards: instances point at their
+    // BVHs. options.quality applies to the mesh BVHs (the others are BVHs of instances).
     void build(bvh_build_options const& options = {}) {
         if (levels < 0 || levels > 2) throw std::invalid_argument("compiled_scene: levels must be 0, 1 or 2");
         if (levels == 0 && meshes.size() != 1)
             throw std::invalid_argument("compiled_scene: level 0 needs exactly one mesh");
         for (std::size_t g = 0; g < meshes.size(); ++g) {
             for (auto& t : meshes[g].triangles) t.geom_id = std::uint32_t(g);
+            auto const start = std::chrono::steady_clock::now();
             meshes[g].accel = build_binned_sah(meshes[g].triangles, options);
+            meshes[g].build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         }
         auto const mesh_instances = [&](std::vector<placement> const& ps) {
             std::vector<mesh_instance> out;

@@ -1,6 +1,6 @@
 // Tests of canopy.bvh: the binned SAH builder's contract (every primitive once, ids, bounds,
-// depth, leaf sizes), statistics, instance bounds and degenerate inputs, each checked by walking
-// the tree independently of the library.
+// depth, leaf sizes), statistics, instance bounds, degenerate inputs and refits, each checked by
+// walking the tree independently of the library.
 #include <catch2/catch.hpp>
 
 #include <algorithm>
@@ -11,7 +11,12 @@
 #include <limits>
 #include <random>
 #include <span>
+#include <stdexcept>
+#include <string>
+#include <utility>
 #include <vector>
+
+#include "test_support.hpp"
 
 import canopy.query;
 
@@ -637,4 +642,170 @@ TEST_CASE("build_quality::automatic: the sliver box share, by hand, and the qual
     auto const high = canopy::build_binned_sah(slivers, {.quality = build_quality::high});
     CHECK(automatic.nodes.size() == high.nodes.size());
     CHECK(canopy::compute_stats(automatic).sah_cost == canopy::compute_stats(high).sah_cost);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Refit
+
+namespace {
+
+// The tree's shape: every node's (index, count), binary then wide.
+template <typename Prim>
+std::vector<std::uint32_t> tree_shape(canopy::bvh<Prim> const& b) {
+    std::vector<std::uint32_t> shape;
+    for (auto const& n : b.nodes) shape.insert(shape.end(), {n.index, n.count});
+    for (auto const& w : b.wide_nodes) {
+        shape.insert(shape.end(), w.child.begin(), w.child.end());
+        shape.insert(shape.end(), w.count.begin(), w.count.end());
+    }
+    return shape;
+}
+
+// The boxes of a refitted tree hold their contents in both node arrays, the root's box is
+// exactly the union of the moved triangles', every leaf stores moved[prim_id] with its ids, and
+// a block lane is testable exactly when its triangle is not degenerate.
+void check_refitted(mesh_bvh const& b, std::vector<triangle> const& moved) {
+    walk_result const w = walk(b);
+    CHECK(w.structure_ok);
+    CHECK(w.leaf_bounds_ok);
+    CHECK(w.inner_bounds_ok);
+    wide_walk_result const ww = walk_wide(b);
+    CHECK(ww.structure_ok);
+    CHECK(ww.bounds_ok);
+    canopy::aabb all;
+    for (auto const& t : moved) all = extend(all, get_bounds(t));
+    CHECK(box_contains(b.bounds(), all));
+    CHECK(box_contains(all, b.bounds()));
+    CHECK(box_contains(ww.root_union, all));
+    CHECK(box_contains(all, ww.root_union));
+    bool stored_ok = true;
+    canopy::for_each_primitive(b, [&](triangle const& p) {
+        stored_ok = stored_ok && p.prim_id < moved.size() && same_vertices(p, moved[p.prim_id]) &&
+                    p.geom_id == moved[p.prim_id].geom_id;
+    });
+    CHECK(stored_ok);
+    bool testable_ok = true;
+    for (auto const& block : b.blocks)
+        for (int lane = 0; lane < canopy::triangle_block_width; ++lane)
+            if (block.prim_id[std::size_t(lane)] != canopy::invalid_id)
+                testable_ok = testable_ok && ((block.testable >> lane) & 1u) == (is_degenerate(block.triangle_at(lane)) ? 0u : 1u);
+    CHECK(testable_ok);
+}
+
+} // namespace
+
+TEST_CASE("refit keeps the tree and rebounds the moved triangles in the binary and the wide nodes") {
+    random_source rng(91);
+    std::vector<std::pair<char const*, std::vector<triangle>>> const meshes{
+        {"soup", test_support::triangle_soup(rng, 2000, 4.0f, 0.5f)}, {"slivers", test_support::sliver_mesh()}};
+    for (auto const& [name, mesh] : meshes) {
+        for (auto const quality : {canopy::build_quality::fast, canopy::build_quality::high}) {
+            for (auto const how : {test_support::deformation::displace, test_support::deformation::twist,
+                                   test_support::deformation::collapse}) {
+                INFO(name << ", deformation " << int(how) << ", quality " << int(quality));
+                auto moved = test_support::deformed(mesh, how, 1.0f, rng);
+                // A few triangles made degenerate, and one degenerate triangle made whole again.
+                for (std::size_t i = 0; i < moved.size(); i += 97) moved[i].v2 = moved[i].v1;
+                mesh_bvh b = canopy::build_binned_sah(mesh, {.quality = quality});
+                auto const shape = tree_shape(b);
+                canopy::refit(b, moved);
+                CHECK(tree_shape(b) == shape);
+                check_refitted(b, moved);
+                canopy::refit(b, mesh);
+                CHECK(tree_shape(b) == shape);
+                check_refitted(b, mesh);
+            }
+        }
+    }
+}
+
+TEST_CASE("refit of unmoved geometry gives back a fast build's boxes bit for bit, and a high build's or larger") {
+    random_source rng(92);
+    auto const mesh = test_support::sliver_mesh();
+    mesh_bvh const built = canopy::build_binned_sah(mesh, {.quality = canopy::build_quality::fast});
+    mesh_bvh b = built;
+    canopy::refit(b, mesh);
+    REQUIRE(b.nodes.size() == built.nodes.size());
+    REQUIRE(b.wide_nodes.size() == built.wide_nodes.size());
+    bool same = true;
+    for (std::size_t i = 0; i < b.nodes.size(); ++i)
+        same = same && std::memcmp(&b.nodes[i], &built.nodes[i], sizeof(b.nodes[i])) == 0;
+    for (std::size_t i = 0; i < b.wide_nodes.size(); ++i)
+        same = same && std::memcmp(&b.wide_nodes[i], &built.wide_nodes[i], sizeof(b.wide_nodes[i])) == 0;
+    CHECK(same);
+    CHECK(canopy::sah_drift(b, canopy::compute_stats(built).sah_cost) == 1.0);
+
+    // At high, a leaf held a clipped piece of a long triangle: after a refit, the whole triangle.
+    mesh_bvh const high = canopy::build_binned_sah(mesh, {.quality = canopy::build_quality::high});
+    mesh_bvh h = high;
+    canopy::refit(h, mesh);
+    bool contains = true, some_larger = false;
+    for (std::size_t i = 0; i < h.nodes.size(); ++i) {
+        contains = contains && box_contains(h.nodes[i].bounds, high.nodes[i].bounds);
+        some_larger = some_larger || !box_contains(high.nodes[i].bounds, h.nodes[i].bounds);
+    }
+    CHECK(contains);
+    CHECK(some_larger);
+    check_refitted(h, mesh);
+}
+
+TEST_CASE("refit refuses a mesh of another size, and refits an empty BVH and a BVH of instances") {
+    random_source rng(93);
+    auto const mesh = test_support::triangle_soup(rng, 100, 2.0f, 0.5f);
+    mesh_bvh b = canopy::build_binned_sah(mesh);
+    std::vector<triangle> const fewer(mesh.begin(), mesh.end() - 1);
+    CHECK(test_support::what_of<std::invalid_argument>([&] { canopy::refit(b, fewer); }) ==
+          "canopy::refit: 99 primitives given for a BVH of 100");
+    mesh_bvh empty;
+    canopy::refit(empty, std::vector<triangle>{});
+    CHECK(empty.empty());
+
+    // Instances of b, refitted after b moved: the top level bounds the moved instances.
+    std::vector<canopy::instance<mesh_bvh>> instances;
+    for (std::uint32_t k = 0; k < 5; ++k) instances.emplace_back(b, test_support::random_transform(rng, 5.0f), k);
+    auto top = canopy::build_binned_sah(instances);
+    canopy::refit(b, test_support::deformed(mesh, test_support::deformation::displace, 3.0f, rng));
+    canopy::aabb const stale = top.bounds();
+    canopy::refit(top);
+    walk_result const w = walk(top);
+    CHECK(w.leaf_bounds_ok);
+    CHECK(w.inner_bounds_ok);
+    wide_walk_result const ww = walk_wide(top);
+    CHECK(ww.bounds_ok);
+    canopy::aabb all;
+    for (auto const& inst : instances) all = extend(all, get_bounds(inst));
+    CHECK(box_contains(top.bounds(), all));
+    CHECK(box_contains(all, top.bounds()));
+    CHECK_FALSE(box_contains(stale, all)); // the instances moved out of the top level's old box
+}
+
+TEST_CASE("SAH drift after refits: counted against a fresh build, and the rebuild advice") {
+    // A grid of 64 × 64 squares in the plane z = 0, each split in two, refitted to large twists
+    // about the y axis (the grid becomes a helicoid).
+    std::vector<triangle> grid;
+    for (int i = 0; i < 64; ++i)
+        for (int j = 0; j < 64; ++j) {
+            auto const p = [](int x, int y) { return vec3<float>(float(x) / 16.0f - 2.0f, float(y) / 16.0f - 2.0f, 0.0f); };
+            grid.push_back({p(i, j), p(i + 1, j), p(i + 1, j + 1), std::uint32_t(grid.size()), 0});
+            grid.push_back({p(i, j), p(i + 1, j + 1), p(i, j + 1), std::uint32_t(grid.size()), 0});
+        }
+    random_source rng(94);
+    mesh_bvh b = canopy::build_binned_sah(grid);
+    double const built = canopy::compute_stats(b).sah_cost;
+    double previous = 1.0;
+    for (float const turns : {0.05f, 0.5f, 2.0f}) {
+        auto const moved = test_support::deformed(grid, test_support::deformation::twist, turns * 6.2831853f / 4.0f, rng);
+        canopy::refit(b, moved);
+        double const drift = canopy::sah_drift(b, built);
+        double const fresh = canopy::compute_stats(canopy::build_binned_sah(moved)).sah_cost / built;
+        INFO(turns << " turns over the height: refitted SAH " << drift << " × the built tree's, fresh build " << fresh);
+        CHECK(drift >= previous);
+        CHECK(drift > fresh);
+        CHECK(canopy::needs_rebuild(b, built) == (drift > canopy::default_rebuild_drift));
+        previous = drift;
+    }
+    CHECK(previous > canopy::default_rebuild_drift); // two turns: rebuild
+    mesh_bvh small = canopy::build_binned_sah(grid);
+    canopy::refit(small, test_support::deformed(grid, test_support::deformation::twist, 0.05f, rng));
+    CHECK_FALSE(canopy::needs_rebuild(small, built)); // a slight twist: keep refitting
 }

@@ -1,6 +1,7 @@
 // A random three-level instanced scene shared by the intersector and query tests: two triangle
 // soups and their BVHs, eight instances of them (ids 10 + k) in a two-level BVH, and three
-// instances of that (ids 100 + j) in a three-level BVH. The same seed gives the same scene.
+// instances of that (ids 100 + j) in a three-level BVH. The same seed gives the same scene. Also
+// the brute-force hits of a ray on instances of one mesh.
 //
 // Include it after random_support.hpp, in a test file that imports canopy.query.
 #pragma once
@@ -35,5 +36,30 @@ struct nested_scene {
     nested_scene(nested_scene const&) = delete;
     nested_scene& operator=(nested_scene const&) = delete;
 };
+
+// The hits of a plain loop over every instance and triangle, each instance's ray taken into object
+// space with the instance's own stored inverse (as traversal does), sorted by (t, inst_id,
+// prim_id). Needs <algorithm> and <tuple>.
+inline std::vector<canopy::hit_record<canopy::ray, canopy::triangle>> instanced_brute_force_hits(
+    canopy::ray const& r, std::vector<mesh_instance> const& instances, std::vector<canopy::triangle> const& mesh) {
+    std::vector<canopy::hit_record<canopy::ray, canopy::triangle>> hits;
+    for (mesh_instance const& inst : instances) {
+        canopy::ray local = r;
+        if (!inst.identity) {
+            local.origin = inst.world_to_object.transform_point(r.origin);
+            local.direction = inst.world_to_object.transform_vector(r.direction);
+        }
+        for (canopy::triangle const& tri : mesh) {
+            auto h = canopy::intersect(local, tri);
+            if (!h.hit) continue;
+            h.inst_id = inst.inst_id;
+            hits.push_back(h);
+        }
+    }
+    std::sort(hits.begin(), hits.end(), [](auto const& a, auto const& b) {
+        return std::tuple(a.t, a.inst_id, a.prim_id) < std::tuple(b.t, b.inst_id, b.prim_id);
+    });
+    return hits;
+}
 
 } // namespace test_support

@@ -1039,3 +1039,112 @@ TEST_CASE("double-precision BVHs built with spatial splits equal brute force") {
     }
     require_agreement(agreement, 100);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Refit: a BVH built for one mesh, refitted to the mesh moved, answers as a fresh build over the
+// moved mesh does, and as brute force.
+
+namespace {
+
+using test_support::deformation;
+
+struct refit_case {
+    char const* name;
+    deformation how;
+    float amount;
+};
+
+constexpr refit_case refit_cases[] = {
+    {"random displacement", deformation::displace, 0.6f},
+    {"a large twist", deformation::twist, 1.5f},
+    {"a collapse to a plane", deformation::collapse, 0.0f},
+};
+
+// closest_hit and multi_hit<16> of a and b agree bit for bit, any_hit finds a hit in both or in
+// neither; counted in `mismatches`.
+template <typename A, typename B>
+void compare_trees(ray const& r, A const& a, B const& b, int& mismatches) {
+    bool same = same_record(canopy::closest_hit(r, &a, &a + 1), canopy::closest_hit(r, &b, &b + 1));
+    same = same && canopy::any_hit(r, &a, &a + 1).hit == canopy::any_hit(r, &b, &b + 1).hit;
+    auto const ma = canopy::multi_hit<16>(r, &a, &a + 1), mb = canopy::multi_hit<16>(r, &b, &b + 1);
+    for (std::size_t i = 0; i < ma.size(); ++i) same = same && same_record(ma[i], mb[i]);
+    mismatches += !same;
+}
+
+} // namespace
+
+TEST_CASE("after a refit, queries equal brute force and a fresh build's, at both build qualities") {
+    random_source rng(121);
+    std::vector<std::pair<char const*, std::vector<triangle>>> const meshes{
+        {"soup", triangle_soup(rng, 1500, 3.0f, 0.5f)}, {"slivers", test_support::sliver_mesh()}};
+    for (auto const& [mesh_name, mesh] : meshes) {
+        for (auto const quality : {canopy::build_quality::fast, canopy::build_quality::high}) {
+            for (auto const& c : refit_cases) {
+                INFO(mesh_name << ", " << c.name << ", quality " << (quality == canopy::build_quality::high ? "high" : "fast"));
+                auto const moved = test_support::deformed(mesh, c.how, c.amount, rng);
+                mesh_bvh refitted = canopy::build_binned_sah(mesh, {.quality = quality});
+                canopy::refit(refitted, moved);
+                mesh_bvh const fresh = canopy::build_binned_sah(moved, {.quality = quality});
+                query_agreement agreement;
+                int fresh_mismatches = 0, packet_mismatches = 0;
+                auto const rays = rays_for(moved, fresh.bounds(), rng, 150);
+                for (std::size_t i = 0; i < rays.size(); ++i) {
+                    ray const& r = rays[i];
+                    compare_queries(r, &refitted, &refitted + 1, brute_force_hits(r, moved, library_test),
+                                    [] { return canopy::default_intersector{}; }, agreement);
+                    compare_trees(r, refitted, fresh, fresh_mismatches);
+                    if (i % 8 == 7) {
+                        std::array<ray, 8> lanes;
+                        for (std::size_t k = 0; k < 8; ++k) lanes[k] = rays[i - 7 + k];
+                        auto const packet = canopy::closest_hit(pack(lanes), &refitted, &refitted + 1);
+                        for (int k = 0; k < 8; ++k)
+                            packet_mismatches +=
+                                !lane_equals(packet, k, canopy::closest_hit(lanes[std::size_t(k)], &fresh, &fresh + 1));
+                    }
+                }
+                require_agreement(agreement, 100);
+                CHECK(fresh_mismatches == 0);
+                CHECK(packet_mismatches == 0);
+            }
+        }
+    }
+}
+
+TEST_CASE("a top level refitted over refitted instances equals a fresh two-level build and brute force") {
+    random_source rng(122);
+    auto const mesh = triangle_soup(rng, 800, 2.0f, 0.4f);
+    std::vector<canopy::affine_transform<float>> transforms;
+    for (int k = 0; k < 12; ++k) transforms.push_back(random_transform(rng, 6.0f));
+    for (auto const quality : {canopy::build_quality::fast, canopy::build_quality::high}) {
+        for (auto const& c : refit_cases) {
+            INFO(c.name << ", quality " << (quality == canopy::build_quality::high ? "high" : "fast"));
+            auto const moved = test_support::deformed(mesh, c.how, c.amount * 2.0f, rng);
+            auto const instances_of = [&](mesh_bvh const& b) {
+                std::vector<mesh_instance> out;
+                for (std::size_t k = 0; k < transforms.size(); ++k) out.emplace_back(b, transforms[k], std::uint32_t(k));
+                return out;
+            };
+            mesh_bvh refitted = canopy::build_binned_sah(mesh, {.quality = quality});
+            auto const instances = instances_of(refitted);
+            two_level top = canopy::build_binned_sah(instances);
+            canopy::refit(refitted, moved);
+            canopy::refit(top);
+            mesh_bvh const fresh = canopy::build_binned_sah(moved, {.quality = quality});
+            auto const fresh_instances = instances_of(fresh);
+            two_level const fresh_top = canopy::build_binned_sah(fresh_instances);
+
+            std::vector<vec3<float>> targets;
+            for (auto const& inst : instances)
+                for (std::size_t i = 0; i < moved.size(); i += 40) targets.push_back(inst.object_to_world.transform_point(moved[i].v0));
+            query_agreement agreement;
+            int fresh_mismatches = 0;
+            for (ray const& r : rays_towards(rng, fresh_top.bounds(), targets, 250)) {
+                auto const expected = test_support::instanced_brute_force_hits(r, instances, moved);
+                compare_queries(r, &top, &top + 1, expected, [] { return canopy::default_intersector{}; }, agreement);
+                compare_trees(r, top, fresh_top, fresh_mismatches);
+            }
+            require_agreement(agreement, 150);
+            CHECK(fresh_mismatches == 0);
+        }
+    }
+}

@@ -1,7 +1,7 @@
 // Random test geometry shared by the core tests (geometry, intersector, bvh, query, stress): a
-// seeded random source, random affine transforms, triangle soups, rays into a box, and a
-// three-level instanced scene; also eight rays packed into one packet and the checkerboard alpha
-// mask the intersector tests use. Fixed seeds: every run tests the same cases.
+// seeded random source, random affine transforms, triangle soups, rays into a box, meshes moved
+// for refits, and a three-level instanced scene; also eight rays packed into one packet and the
+// checkerboard alpha mask the intersector tests use. Fixed seeds: every run tests the same cases.
 //
 // Include it after the test file's `import canopy.query;` (or `import canopy.geometry;`, for
 // what needs no BVH): it uses <array>, <cmath>, <cstdint>, <limits>, <random> and <vector>,
@@ -121,6 +121,33 @@ inline std::vector<canopy::ray> random_rays(random_source& rng, canopy::aabb con
         rays.push_back(make_ray(origin, rng.point_in(bounds) - origin));
     }
     return rays;
+}
+
+// Ways to move a mesh's vertices (same triangles, same order, same ids), for refit tests.
+//   displace  every vertex moved by up to `amount` on each axis, at random;
+//   twist     each vertex turned about the y axis by `amount` radians per unit of height;
+//   collapse  every vertex put on the plane y = 0 (a flat mesh: boxes of zero height).
+enum class deformation { displace, twist, collapse };
+
+inline std::vector<canopy::triangle> deformed(std::vector<canopy::triangle> mesh, deformation how, float amount,
+                                              random_source& rng) {
+    auto const move = [&](canopy::vec3<float> p) -> canopy::vec3<float> {
+        switch (how) {
+        case deformation::displace: return p + rng.point(-amount, amount);
+        case deformation::twist: {
+            double const a = double(amount) * double(p.y), c = std::cos(a), s = std::sin(a);
+            return {float(c * double(p.x) - s * double(p.z)), p.y, float(s * double(p.x) + c * double(p.z))};
+        }
+        case deformation::collapse: return {p.x, 0.0f, p.z};
+        }
+        return p;
+    };
+    for (auto& t : mesh) {
+        t.v0 = move(t.v0);
+        t.v1 = move(t.v1);
+        t.v2 = move(t.v2);
+    }
+    return mesh;
 }
 
 // Rotation (random unit quaternion) × non-uniform scale in [0.5, 2], plus a translation in

@@ -620,3 +620,61 @@ TEST_CASE("compile() reports the polygon faces a loader had to fan, naming the f
                      "256 corners): their triangles may cover more than the face; the first in mesh 'bad polygons' "
                      "(model.ply: face 17)") == 1);
 }
+
+TEST_CASE("compile() builds the mesh BVHs at the quality of its options, automatic by default, and reports it") {
+    // A mesh of long thin triangles (a fan of needles), placed twice.
+    canopy::mesh_data fan;
+    fan.name = "fan";
+    fan.positions.push_back({0, 0, 0});
+    for (int i = 0; i <= 200; ++i) {
+        double const a = 0.002 * double(i);
+        fan.positions.push_back({float(10.0 * std::cos(a)), float(10.0 * std::sin(a)), 0.0f});
+    }
+    for (std::uint32_t i = 1; i <= 200; ++i) fan.triangles.push_back({0, i, i + 1});
+    canopy::scene s;
+    auto const m = s.add_mesh(fan);
+    s.add_mesh_node(s.root(), m);
+    s.add_mesh_node(s.add_transform(s.root(), translate(0, 0, 2)), m);
+
+    // By default (automatic) the needles are split; a mesh of well-shaped triangles is not.
+    auto const automatic = canopy::compile(s);
+    CHECK(automatic.statistics.quality == canopy::build_quality::automatic);
+    REQUIRE(automatic.meshes.size() == 1);
+    CHECK(automatic.meshes[0].accel.quality == canopy::build_quality::high);
+    CHECK(decided(automatic, "mesh BVHs built at quality automatic (the default): 1 of 1 with spatial splits"));
+    canopy::mesh_data quad;
+    quad.name = "quad";
+    quad.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+    quad.triangles = {{0, 1, 2}, {0, 2, 3}};
+    canopy::scene q;
+    q.add_mesh_node(q.root(), q.add_mesh(quad));
+    auto const plain = canopy::compile(q);
+    REQUIRE(plain.meshes.size() == 1);
+    CHECK(plain.meshes[0].accel.quality == canopy::build_quality::fast);
+    CHECK(decided(plain, "mesh BVHs built at quality automatic (the default): 0 of 1 with spatial splits"));
+
+    auto const fast = canopy::compile(s, {.bvh = {.quality = canopy::build_quality::fast}});
+    CHECK(fast.statistics.quality == canopy::build_quality::fast);
+    CHECK(decided(fast, "mesh BVHs built at quality fast: object splits only"));
+    auto const high = canopy::compile(s, {.bvh = {.quality = canopy::build_quality::high}});
+    CHECK(high.statistics.quality == canopy::build_quality::high);
+    CHECK(decided(high, "mesh BVHs built at quality high: object and spatial splits"));
+    for (auto const* c : {&fast, &high}) {
+        REQUIRE(c->meshes.size() == 1);
+        CHECK(c->meshes[0].build_seconds > 0.0);
+        CHECK(c->statistics.mesh_build_seconds == c->meshes[0].build_seconds);
+        CHECK(c->statistics.mesh_build_seconds <= c->statistics.build_seconds);
+    }
+    // The builds themselves: the fast one as build_binned_sah gives it, the high one with split
+    // references (more leaf slots than triangles) and a lower SAH cost.
+    std::vector<canopy::triangle> tris;
+    for (auto const& t : fast.meshes[0].triangles) tris.push_back(t);
+    CHECK(canopy::compute_stats(fast.meshes[0].accel).sah_cost ==
+          canopy::compute_stats(canopy::build_binned_sah(tris, {.quality = canopy::build_quality::fast})).sah_cost);
+    CHECK(canopy::compute_stats(automatic.meshes[0].accel).sah_cost == canopy::compute_stats(canopy::build_binned_sah(tris)).sah_cost);
+    std::size_t references = 0;
+    canopy::for_each_primitive(high.meshes[0].accel, [&](canopy::triangle const&) { ++references; });
+    CHECK(references > tris.size());
+    CHECK(canopy::compute_stats(high.meshes[0].accel).sah_cost < canopy::compute_stats(fast.meshes[0].accel).sah_cost);
+    check_against_brute_force(high, 300, 7);
+}

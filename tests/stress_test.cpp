@@ -40,6 +40,7 @@ import canopy.query;
 import canopy.procedural;
 
 #include "stress_support.hpp"
+#include "nested_scene.hpp"
 
 namespace {
 
@@ -216,30 +217,6 @@ struct instanced_scene {
         top = build_bvh(instances);
     }
 };
-
-// The hits of a plain loop over every instance and triangle, each instance's ray taken into object
-// space with the instance's own stored inverse, sorted by (t, inst_id, prim_id).
-std::vector<record> brute_force_hits(ray const& r, std::vector<mesh_instance> const& instances,
-                                     std::vector<triangle> const& mesh) {
-    std::vector<record> hits;
-    for (mesh_instance const& inst : instances) {
-        ray local = r;
-        if (!inst.identity) {
-            local.origin = inst.world_to_object.transform_point(r.origin);
-            local.direction = inst.world_to_object.transform_vector(r.direction);
-        }
-        for (triangle const& tri : mesh) {
-            record h = canopy::intersect(local, tri);
-            if (!h.hit) continue;
-            h.inst_id = inst.inst_id;
-            hits.push_back(h);
-        }
-    }
-    std::sort(hits.begin(), hits.end(), [](record const& a, record const& b) {
-        return std::tuple(a.t, a.inst_id, a.prim_id) < std::tuple(b.t, b.inst_id, b.prim_id);
-    });
-    return hits;
-}
 
 std::vector<record> brute_force_hits(ray const& r, std::vector<triangle> const& mesh) {
     std::vector<record> hits;
@@ -1234,7 +1211,7 @@ TEST_CASE("multi_hit<N> equals the first N brute-force hits on a soup, stacked c
                 hits += expected.size();
                 for (std::size_t i = 1; i < expected.size(); ++i) ties += expected[i].t == expected[i - 1].t;
                 check_multi_hits(r, b, expected, failures, name);
-                check_multi_hits(r, top, brute_force_hits(r, instances, tris), failures, std::string("instanced ") + name);
+                check_multi_hits(r, top, test_support::instanced_brute_force_hits(r, instances, tris), failures, std::string("instanced ") + name);
             }
         }
     };

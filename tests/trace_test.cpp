@@ -1163,3 +1163,82 @@ TEST_CASE("canopy info reports the non-convex polygon of more than 256 corners t
                                "with more than 256 corners): their triangles may cover more than the face; the first in "
                                "mesh 'comb' (" + comb.string() + ":301)\n"));
 }
+
+TEST_CASE("canopy trace --quality high gives the hits of the library's fast build, byte for byte, bad values exit 2") {
+    // The same hits, byte for byte, as the library's fast build (the triangle test
+    // does not depend on the tree).
+    trace_fixture const f;
+    for (bool const instanced : {false, true}) {
+        INFO((instanced ? "instanced .inst scene" : "single-mesh .obj scene"));
+        fs::path const out = f.folder.path / "high.hits";
+        auto const result = run_canopy({"trace", "--scene", f.scene_file(instanced).string(), "--rays",
+                                        f.rays_file(instanced).string(), "--query", "closest", "--out", out.string(),
+                                        "--quality", "high"});
+        INFO(result.output);
+        REQUIRE(result.exit_code == 0);
+        CHECK_THAT(result.output, Catch::Contains(" ms at quality high, trace "));
+        auto const& rays = f.rays(instanced);
+        std::string const got = read_bytes(out);
+        REQUIRE(got.size() == 20 * rays.size());
+        int mismatches = 0;
+        for (std::size_t i = 0; i < rays.size(); ++i)
+            mismatches += got.compare(20 * i, 20, hit_bytes(f.reference(rays[i], instanced, true, false))) != 0;
+        CHECK(mismatches == 0);
+    }
+
+    check_usage_errors({
+        {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "closest", "--out", (f.folder.path / "x.hits").string(),
+          "--quality", "best"},
+         "--quality must be automatic, fast or high, not 'best'"},
+        {{"render", "--quality", "high"}, "--quality applies to a SCENE: the demo scene is built at the default quality"},
+        {{"info", "--plugins", "--quality", "high"}, "--quality applies to a SCENE, not to --plugins"},
+    });
+}
+
+TEST_CASE("canopy info and render take --quality automatic|fast|high, info reports the mesh builds") {
+    // info: the quality, the mesh builds' SAH cost (mean over triangles) and bytes per triangle
+    // of what compile() builds at that quality.
+    temp_folder const folder("canopy_cli_quality_test");
+    auto const file = folder.write("pairs.json", scene_json);
+    canopy::registry const& r = canopy::builtin_registry();
+    canopy::scene const s = canopy::load_scene(file, r);
+    for (auto const quality : {canopy::build_quality::automatic, canopy::build_quality::fast, canopy::build_quality::high}) {
+        bool const high = quality == canopy::build_quality::high;
+        bool const automatic = quality == canopy::build_quality::automatic;
+        canopy::compiled_scene const c = canopy::compile(s, {.plugins = &r, .bvh = {.quality = quality}});
+        double sah = 0.0, bytes = 0.0, triangles = 0.0;
+        for (auto const& m : c.meshes) {
+            auto const st = canopy::compute_stats(m.accel);
+            sah += st.sah_cost * double(st.primitive_count);
+            bytes += double(st.bytes);
+            triangles += double(st.primitive_count);
+        }
+        char expected[160];
+        std::snprintf(expected, sizeof expected, "SAH cost %.2f (mean over triangles), %.1f bytes/triangle",
+                      sah / triangles, bytes / triangles);
+        std::vector<std::string> args{"info", file.string()};
+        if (!automatic) args.insert(args.end(), {"--quality", high ? "high" : "fast"});
+        auto const result = run_canopy(args);
+        INFO(result.output);
+        REQUIRE(result.exit_code == 0);
+        std::size_t split = 0;
+        for (auto const& m : c.meshes) split += m.accel.quality == canopy::build_quality::high ? 1 : 0;
+        std::string const name = automatic ? "automatic (high for " + std::to_string(split) + " of " +
+                                                 std::to_string(c.meshes.size()) + " mesh" +
+                                                 (c.meshes.size() == 1 ? "" : "es") + ")"
+                                           : (high ? "high" : "fast");
+        CHECK_THAT(result.output, Catch::Contains("mesh BVH build: quality " + name + ", "));
+        CHECK_THAT(result.output, Catch::Contains(expected));
+        CHECK_THAT(result.output, Catch::Contains(std::string("- mesh BVHs built at quality ") +
+                                                  (automatic ? "automatic (the default): " + std::to_string(split) + " of "
+                                                             : (high ? "high" : "fast"))));
+    }
+
+    // render at high renders the scene and says so.
+    auto const rendered = run_canopy({"render", file.string(), "-o", (folder.path / "out").string(), "--size", "32x24",
+                                      "--quality", "high"});
+    INFO(rendered.output);
+    CHECK(rendered.exit_code == 0);
+    CHECK_THAT(rendered.output, Catch::Contains("(mesh BVHs at quality high)"));
+    CHECK(fs::exists(folder.path / "out" / "pairs.png"));
+}

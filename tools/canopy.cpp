@@ -3,10 +3,11 @@
 //   canopy render [SCENE] [-o OUT] [--size WxH] [--spp N] [--kernel primary|ao|path|heatmap]
 //                 [--intersector auto|none|alpha|procedural|bench|costs] [--ao-radius R[%]]
 //                 [--exposure EV] [--tonemap none|reinhard|aces] [--threads N] [--plugin FILE]...
-//                 [LIMITS]
+//                 [--quality automatic|fast|high] [LIMITS]
 //   canopy trace --scene FILE --rays FILE --query closest|any --out FILE
-//                [--intersector none|alpha] [--threads N] [LIMITS]
-//   canopy info SCENE | --plugins [--plugin FILE]... [LIMITS]
+//                [--intersector none|alpha] [--threads N] [--quality automatic|fast|high] [LIMITS]
+//   canopy info SCENE [--quality automatic|fast|high] | --plugins [--plugin FILE]... [LIMITS]
+//   --quality: the build quality of the mesh BVHs (canopy::build_quality; default fast).
 //   LIMITS: [--max-file-bytes N] [--max-texels N] [--max-total-texels N] [--max-triangles N]
 //           [--max-placements N] [--max-depth N]  (canopy::resource_limits, set before anything
 //           is loaded)
@@ -101,7 +102,7 @@ constexpr char const* limits_usage =
 
 constexpr char const* trace_options_usage =
     "usage: canopy trace --scene FILE --rays FILE --query closest|any --out FILE\n"
-    "                    [--intersector none|alpha] [--threads N] [limits]\n"
+    "                    [--intersector none|alpha] [--threads N] [--quality Q] [limits]\n"
     "  --scene FILE        .obj (single mesh) or .inst (instanced mesh)\n"
     "  --rays FILE         32-byte rays: origin, tmin, direction, tmax (float32); at least one\n"
     "  --query KIND        closest: nearest accepted hit; any: first accepted hit\n"
@@ -112,7 +113,8 @@ constexpr char const* trace_options_usage =
 constexpr char const* render_options_usage =
     "usage: canopy render [SCENE] [-o OUT] [--size WxH] [--spp N] [--kernel KIND]\n"
     "                     [--intersector KIND] [--ao-radius R[%]] [--exposure EV]\n"
-    "                     [--tonemap CURVE] [--threads N] [--plugin FILE]... [limits]\n"
+    "                     [--tonemap CURVE] [--threads N] [--plugin FILE]... [--quality Q]\n"
+    "                     [limits]\n"
     "  SCENE               a file any registered plugin loads (canopy info --plugins lists them),\n"
     "                      or gen:NAME[:KEY=VALUE,...] for a registered generator; without it, the\n"
     "                      built-in demo scene is rendered into the four images of the paper's\n"
@@ -136,15 +138,21 @@ constexpr char const* render_options_usage =
     "  --plugin FILE       load a shared-library plugin first (may be repeated)\n";
 
 constexpr char const* info_options_usage =
-    "usage: canopy info SCENE [--plugin FILE]... [limits]\n"
+    "usage: canopy info SCENE [--plugin FILE]... [--quality Q] [limits]\n"
     "       canopy info --plugins [--plugin FILE]...\n"
     "  SCENE      a file any registered plugin loads, or gen:NAME[:KEY=VALUE,...]\n"
     "  --plugins  list the registered loaders, image loaders, generators and node types\n"
     "  --plugin FILE  load a shared-library plugin first (may be repeated)\n";
 
-std::string const trace_usage = std::string(trace_options_usage) + limits_usage;
-std::string const render_usage = std::string(render_options_usage) + limits_usage;
-std::string const info_usage = std::string(info_options_usage) + limits_usage;
+// --quality, for the commands that build BVHs of a scene's meshes.
+constexpr char const* quality_usage =
+    "  --quality Q         build quality of the mesh BVHs: fast (default; object splits) or high\n"
+    "                      (spatial splits too: faster tracing of long thin triangles, slower\n"
+    "                      builds, more memory)\n";
+
+std::string const trace_usage = std::string(trace_options_usage) + quality_usage + limits_usage;
+std::string const render_usage = std::string(render_options_usage) + quality_usage + limits_usage;
+std::string const info_usage = std::string(info_options_usage) + quality_usage + limits_usage;
 
 // ---- arguments ---------------------------------------------------------------------------
 
@@ -261,6 +269,26 @@ void apply_limits(arguments const& args) {
     if (args.has("--max-depth")) limits.max_depth = whole_option(args, "--max-depth", 1, most);
 }
 
+// --quality automatic|fast|high: the build quality of the mesh BVHs (default automatic, the
+// library's: spatial splits only for meshes of long thin triangles).
+canopy::build_quality quality_option(arguments const& args) {
+    std::string const q = args.value_or("--quality", "automatic");
+    if (q == "high") return canopy::build_quality::high;
+    if (q == "fast") return canopy::build_quality::fast;
+    if (q != "automatic") throw usage_error("--quality must be automatic, fast or high, not " + quote(q));
+    return canopy::build_quality::automatic;
+}
+
+char const* quality_name(canopy::build_quality q) {
+    return q == canopy::build_quality::high ? "high" : q == canopy::build_quality::fast ? "fast" : "automatic";
+}
+
+// The quality asked for and, when automatic, the one a build used: "automatic (high)".
+std::string quality_used(canopy::build_quality asked, canopy::build_quality used) {
+    if (asked != canopy::build_quality::automatic) return quality_name(asked);
+    return std::string("automatic (") + quality_name(used) + ")";
+}
+
 // --threads N: the worker limit, kept in `control` (constructed in place: a global_control must
 // not be copied) for as long as the caller keeps it.
 void limit_threads(arguments const& args, std::optional<tbb::global_control>& control) {
@@ -310,7 +338,7 @@ struct loaded_scene {
     double build_seconds = 0.0;
 };
 
-std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path) {
+std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path, canopy::build_quality quality) {
     auto scene = std::make_unique<loaded_scene>();
     canopy::require_regular_file(path); // a folder or a device is named as such, whatever its extension
     auto const ext = path.extension().string();
@@ -322,7 +350,7 @@ std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path
         if (mesh.triangles.empty()) throw canopy::scene_error(path.string(), "", "holds no triangles: nothing to trace");
         step("building the BVH of " + path.string());
         auto const start = clock_type::now();
-        scene->mesh = canopy::build_binned_sah(mesh.triangles);
+        scene->mesh = canopy::build_binned_sah(mesh.triangles, {.quality = quality});
         scene->build_seconds = seconds_since(start);
     } else if (ext == ".inst") {
         auto const inst = canopy::read_bench_inst(path);
@@ -331,7 +359,7 @@ std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path
             throw canopy::scene_error(inst.mesh_path.string(), "", "holds no triangles: nothing to trace");
         step("building the BVHs of " + path.string());
         auto const start = clock_type::now();
-        scene->mesh = canopy::build_binned_sah(inst.mesh.triangles);
+        scene->mesh = canopy::build_binned_sah(inst.mesh.triangles, {.quality = quality});
         for (std::size_t k = 0; k < inst.instances.size(); ++k)
             scene->instances.emplace_back(scene->mesh, inst.instances[k], std::uint32_t(k));
         scene->top = canopy::build_binned_sah(scene->instances);
@@ -357,7 +385,7 @@ canopy::bench_hit trace_one(loaded_scene const& scene, canopy::ray const& r, boo
 
 int run_trace(std::span<char*> all_args) {
     arguments const args = parse_arguments(
-        all_args, {{"--scene"}, {"--rays"}, {"--query"}, {"--out"}, {"--intersector"}, {"--threads"}});
+        all_args, {{"--scene"}, {"--rays"}, {"--query"}, {"--out"}, {"--intersector"}, {"--threads"}, {"--quality"}});
     if (args.help) {
         std::fputs(trace_usage.c_str(), stdout);
         return 0;
@@ -374,9 +402,10 @@ int run_trace(std::span<char*> all_args) {
     std::string const isect_name = args.value_or("--intersector", "none");
     if (isect_name != "none" && isect_name != "alpha")
         throw usage_error("--intersector must be none or alpha, not " + quote(isect_name));
+    canopy::build_quality const quality = quality_option(args);
 
     check_writable(out_path);
-    auto const scene = load_bench_scene(scene_path);
+    auto const scene = load_bench_scene(scene_path, quality);
     step("reading " + rays_path);
     canopy::require_regular_file(rays_path, "ray file");
     auto const rays = canopy::read_bench_rays(rays_path);
@@ -400,7 +429,8 @@ int run_trace(std::span<char*> all_args) {
     std::size_t const hit_count = std::size_t(std::count_if(hits.begin(), hits.end(), [](auto const& h) {
         return h.prim != canopy::invalid_id;
     }));
-    fmt::print("build {:.3f} ms, trace {} rays in {:.3f} ms: {:.2f} Mrays/s, {} hits\n", scene->build_seconds * 1e3,
+    fmt::print("build {:.3f} ms at quality {}, trace {} rays in {:.3f} ms: {:.2f} Mrays/s, {} hits\n",
+               scene->build_seconds * 1e3, quality_used(quality, scene->mesh.quality),
                rays.size(), trace_seconds * 1e3, trace_seconds > 0 ? double(rays.size()) / trace_seconds * 1e-6 : 0.0,
                hit_count);
     return 0;
@@ -681,7 +711,7 @@ std::optional<generator_call> parse_generator(std::string const& spec) {
     return call;
 }
 
-loaded_graph load_and_compile(std::string const& spec, canopy::registry const& r) {
+loaded_graph load_and_compile(std::string const& spec, canopy::registry const& r, canopy::build_quality quality) {
     loaded_graph out;
     step("loading " + spec);
     auto const start = clock_type::now();
@@ -692,7 +722,7 @@ loaded_graph load_and_compile(std::string const& spec, canopy::registry const& r
     }
     out.load_seconds = seconds_since(start);
     step("compiling " + spec);
-    out.compiled = canopy::compile(out.graph, {.plugins = &r, .name = spec});
+    out.compiled = canopy::compile(out.graph, {.plugins = &r, .bvh = {.quality = quality}, .name = spec});
     return out;
 }
 
@@ -794,7 +824,8 @@ int run_render(std::span<char*> all_args) {
                                                       {"--exposure"},
                                                       {"--tonemap"},
                                                       {"--threads"},
-                                                      {"--plugin", true, true}});
+                                                      {"--plugin", true, true},
+                                                      {"--quality"}});
     if (args.help) {
         std::fputs(render_usage.c_str(), stdout);
         return 0;
@@ -822,6 +853,9 @@ int run_render(std::span<char*> all_args) {
     bool const heatmap = base.kernel == "heatmap" || base.intersector == "costs";
     if (!scene_path && args.has("--intersector"))
         throw usage_error("--intersector applies to a SCENE: the demo renders each figure with its own intersector");
+    canopy::build_quality const quality = quality_option(args);
+    if (!scene_path && args.has("--quality"))
+        throw usage_error("--quality applies to a SCENE: the demo scene is built at the default quality");
     if (!scene_path && base.kernel == "heatmap")
         throw usage_error("--kernel heatmap applies to a SCENE: the demo's fourth figure is the heat map");
     if (base.intersector == "costs" && args.has("--kernel") && base.kernel != "heatmap")
@@ -910,13 +944,13 @@ int run_render(std::span<char*> all_args) {
             results.emplace_back(job.output.string(), render_image(forest.scene, job));
         }
     } else {
-        auto const loaded = load_and_compile(*scene_path, registry);
+        auto const loaded = load_and_compile(*scene_path, registry, quality);
         canopy::compiled_scene const& scene = loaded.compiled;
         auto const& st = scene.statistics;
         fmt::print(stderr, "{}: {} triangles in {} meshes, {} placements, {} instance level{}; loaded in {:.1f} ms, "
-                           "compiled in {:.1f} ms\n",
+                           "compiled in {:.1f} ms (mesh BVHs at quality {})\n",
                    *scene_path, st.triangles_placed, st.meshes_built, st.placements, st.levels, st.levels == 1 ? "" : "s",
-                   loaded.load_seconds * 1e3, st.build_seconds * 1e3);
+                   loaded.load_seconds * 1e3, st.build_seconds * 1e3, quality_name(st.quality));
         base.scene_name = *scene_path;
         base.camera = scene_camera(scene, *scene_path, aspect);
         if (base.intersector == "auto") base.intersector = st.alpha_mask_needed ? "alpha" : "none";
@@ -950,7 +984,7 @@ void print_registered(char const* what, std::vector<canopy::registered> const& l
 }
 
 int run_info(std::span<char*> all_args) {
-    arguments const args = parse_arguments(all_args, {{"--plugins", false}, {"--plugin", true, true}});
+    arguments const args = parse_arguments(all_args, {{"--plugins", false}, {"--plugin", true, true}, {"--quality"}});
     if (args.help) {
         std::fputs(info_usage.c_str(), stdout);
         return 0;
@@ -961,6 +995,8 @@ int run_info(std::span<char*> all_args) {
     bool const list_plugins = args.has("--plugins");
     if (list_plugins == !args.positional.empty()) throw usage_error("info takes exactly one scene, or --plugins");
     if (!list_plugins) parse_generator(args.positional.front()); // usage errors before any work
+    canopy::build_quality const quality = quality_option(args);
+    if (list_plugins && args.has("--quality")) throw usage_error("--quality applies to a SCENE, not to --plugins");
     apply_limits(args);
     canopy::registry const& registry = plugin_registry(args.values("--plugin"));
     if (list_plugins) {
@@ -973,7 +1009,7 @@ int run_info(std::span<char*> all_args) {
         return 0;
     }
     std::string const scene_path = args.positional.front();
-    auto const loaded = load_and_compile(scene_path, registry);
+    auto const loaded = load_and_compile(scene_path, registry, quality);
     canopy::scene const& g = loaded.graph;
     canopy::compiled_scene const& c = loaded.compiled;
     auto const& st = c.statistics;
@@ -987,18 +1023,29 @@ int run_info(std::span<char*> all_args) {
     fmt::print("decisions:\n");
     for (auto const& d : st.decisions) fmt::print("  - {}\n", d);
     std::size_t mesh_nodes = 0, mesh_prims = 0;
-    double mesh_bytes = 0.0;
+    double mesh_bytes = 0.0, mesh_sah = 0.0;
     for (auto const& m : c.meshes) {
         auto const ms = canopy::compute_stats(m.accel);
         mesh_nodes += ms.node_count;
         mesh_prims += ms.primitive_count;
-        mesh_bytes += ms.bytes_per_primitive * double(ms.primitive_count);
+        mesh_bytes += double(ms.bytes);
+        mesh_sah += ms.sah_cost * double(ms.primitive_count);
     }
+    double const per_triangle = mesh_prims ? 1.0 / double(mesh_prims) : 0.0;
+    std::size_t meshes_high = 0;
+    for (auto const& m : c.meshes) meshes_high += m.accel.quality == canopy::build_quality::high ? 1 : 0;
+    std::string quality_text = quality_name(st.quality);
+    if (st.quality == canopy::build_quality::automatic)
+        quality_text += fmt::format(" (high for {} of {} mesh{})", meshes_high, c.meshes.size(),
+                                    c.meshes.size() == 1 ? "" : "es");
+    fmt::print("mesh BVH build: quality {}, {:.3f} ms, SAH cost {:.2f}{}, {:.1f} bytes/triangle\n",
+               quality_text, st.mesh_build_seconds * 1e3, mesh_sah * per_triangle,
+               c.meshes.size() == 1 ? "" : " (mean over triangles)", mesh_bytes * per_triangle);
     if (c.meshes.size() == 1) {
         print_stats("mesh BVH", canopy::compute_stats(c.meshes[0].accel));
     } else {
         fmt::print("mesh BVHs: {} BVHs, {} primitives, {} nodes, {:.1f} bytes/primitive\n", c.meshes.size(), mesh_prims,
-                   mesh_nodes, mesh_prims ? mesh_bytes / double(mesh_prims) : 0.0);
+                   mesh_nodes, mesh_bytes * per_triangle);
     }
     for (auto const& grp : c.groups) print_stats(fmt::format("group '{}' BVH", grp.name).c_str(), canopy::compute_stats(grp.accel));
     if (c.levels == 1) print_stats("top-level BVH", canopy::compute_stats(c.top1));
