@@ -2,7 +2,8 @@
 // and query.
 //
 // Each visited node tests its children's boxes, nearest hit child first, the others pushed far to
-// near (queries that stop at any hit, Query::wants_near_first == false, skip the ordering). Which
+// near (queries that stop at any hit, Query::wants_near_first == false, visit them in slot order
+// instead). Which
 // box test runs is decided at compile time (node_tester):
 // - the intersector has its own box hook → the hook, once per child box (it sees every test);
 // - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls), with
@@ -275,8 +276,11 @@ struct traversal_stack {
 // The hit children of `node` in visiting order: returns the first to visit and pushes the
 // others so that they pop in order. Near to far when the query wants it (closest, multi hit; as
 // Embree's traverseClosestHit: one and two children without sorting, more sorted by insertion
-// straight into the stack, farthest deepest); else in slot order (any hit: every hit child is
-// visited until one primitive is hit).
+// straight into the stack, farthest deepest); else in increasing slot order (any hit: every hit
+// child is visited until one primitive is hit). Slot order makes any-hit traversal a depth-first
+// walk in one fixed order, whichever children a ray hits: a packet visits the leaves each of its
+// lanes would visit alone in the same relative order, so each lane finds the same first hit
+// (canopy.query:batch).
 template <bool near_first, typename S>
 [[gnu::always_inline]] inline traversal_entry<S> order_children(wide_bvh_node<S> const& node, child_hits<S> const& hits,
                                                                 traversal_stack<S>& stack) {
@@ -286,7 +290,12 @@ template <bool near_first, typename S>
     std::uint32_t const first = std::uint32_t(std::countr_zero(hits.mask));
     std::uint32_t rest = hits.mask & (hits.mask - 1);
     if constexpr (!near_first) {
-        for (; rest != 0; rest &= rest - 1) stack.push(entry(std::uint32_t(std::countr_zero(rest))));
+        // Pushed from the highest slot down: they pop in increasing slot order.
+        for (; rest != 0;) {
+            auto const i = std::uint32_t(31 - std::countl_zero(rest));
+            stack.push(entry(i));
+            rest &= ~(1u << i);
+        }
         return entry(first);
     } else {
         auto const one = entry(first);
