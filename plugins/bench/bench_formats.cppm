@@ -72,10 +72,17 @@ struct bench_hit {
 // The alpha rule of the formats (`--intersector alpha`): on every candidate hit, clamp u and v to
 // [0, 1] and reject the candidate when floor(8u) + floor(8v) is odd; traversal goes on. A filter
 // (canopy.intersector): the library keeps its SIMD leaf test and asks only about candidates.
+// For scalar rays and for packets (lane by lane), so that batch queries can trace packets.
 struct bench_alpha_intersector : basic_intersector<bench_alpha_intersector> {
-    template <typename Ray>
-    bool filter(Ray const&, basic_hit_record<float> const& hr) const {
-        return !rejects(hr.u, hr.v);
+    template <typename Ray, typename T>
+    simd::mask_type_t<T> filter(Ray const&, basic_hit_record<T> const& hr) const {
+        if constexpr (simd::simd_width_v<T> == 1) {
+            return !rejects(hr.u, hr.v);
+        } else {
+            simd::mask_type_t<T> keep;
+            for (int k = 0; k < simd::simd_width_v<T>; ++k) keep.set(k, !rejects(hr.u[k], hr.v[k]));
+            return keep;
+        }
     }
 
     static inline bool rejects(float u, float v) {
