@@ -364,9 +364,10 @@ decltype(auto) on_root(loaded_scene const& scene, Query&& q) {
     return scene.instanced ? q(&scene.top, &scene.top + 1) : q(&scene.mesh, &scene.mesh + 1);
 }
 
-// Rays [first, first + out.size()) into out: one at a time, or through the batch queries.
+// Rays [first, first + out.size()) into out: one at a time, or through the batch queries
+// (returning how many packets they traced).
 template <typename Isect>
-void trace_rays(loaded_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> out,
+std::size_t trace_rays(loaded_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> out,
                 bool closest, bool batch, Isect& isect) {
     if (!batch) {
         for (std::size_t i = 0; i < rays.size(); ++i)
@@ -374,14 +375,15 @@ void trace_rays(loaded_scene const& scene, std::span<canopy::ray const> rays, st
                 return closest ? canopy::closest_hit(rays[i], first, last, isect)
                                : canopy::any_hit(rays[i], first, last, isect);
             }));
-        return;
+        return 0;
     }
     std::array<canopy::basic_hit_record<float>, trace_chunk> records;
     std::span<canopy::basic_hit_record<float>> const got(records.data(), rays.size());
-    on_root(scene, [&](auto first, auto last) {
+    auto const stats = on_root(scene, [&](auto first, auto last) {
         return closest ? canopy::closest_hit(rays, first, last, got, isect) : canopy::any_hit(rays, first, last, got, isect);
     });
     for (std::size_t i = 0; i < rays.size(); ++i) out[i] = to_bench_hit(got[i]);
+    return stats.packets;
 }
 
 int run_trace(std::span<char*> all_args) {
@@ -421,20 +423,22 @@ int run_trace(std::span<char*> all_args) {
     // Chunks of trace_chunk rays (a multiple of 8: the batch queries' groups are the same whatever
     // the threads), as many as the threads take.
     std::size_t const chunks = (rays.size() + trace_chunk - 1) / trace_chunk;
+    std::atomic<std::size_t> packets{0};
     auto const pass = [&] {
+        packets = 0;
         auto const start = clock_type::now();
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](auto const& range) {
             canopy::default_intersector none;
             canopy::bench_alpha_intersector alpha;
+            std::size_t n = 0;
             for (std::size_t c = range.begin(); c != range.end(); ++c) {
                 std::size_t const first = c * trace_chunk, count = std::min(trace_chunk, rays.size() - first);
                 std::span<canopy::ray const> const in(rays.data() + first, count);
                 std::span<canopy::bench_hit> const out(hits.data() + first, count);
-                if (isect_name == "alpha")
-                    trace_rays(*scene, in, out, closest, batch, alpha);
-                else
-                    trace_rays(*scene, in, out, closest, batch, none);
+                n += isect_name == "alpha" ? trace_rays(*scene, in, out, closest, batch, alpha)
+                                           : trace_rays(*scene, in, out, closest, batch, none);
             }
+            packets += n;
         });
         return seconds_since(start);
     };
@@ -457,8 +461,11 @@ int run_trace(std::span<char*> all_args) {
     }));
     std::string const timing =
         reps == 0 ? std::string() : fmt::format(" (median of {} after a warm-up pass)", reps);
+    std::string const how = batch ? fmt::format("batch: {} packets of 8, {} single rays", packets.load(),
+                                                rays.size() - 8 * packets.load())
+                                  : mode;
     fmt::print("build {:.3f} ms, trace {} rays ({}) in {:.3f} ms{}: {:.2f} Mrays/s, {} hits\n",
-               scene->build_seconds * 1e3, rays.size(), mode, trace_seconds * 1e3, timing,
+               scene->build_seconds * 1e3, rays.size(), how, trace_seconds * 1e3, timing,
                trace_seconds > 0 ? double(rays.size()) / trace_seconds * 1e-6 : 0.0, hit_count);
     return 0;
 }
