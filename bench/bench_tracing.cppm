@@ -11,6 +11,7 @@ module;
 #include <limits>
 #include <memory>
 #include <random>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -52,6 +53,15 @@ inline bool parse_quality(std::string const& name, build_quality& quality) {
     return true;
 }
 
+// The batch queries (canopy.query:batch) over all of `rays`.
+template <typename Isect>
+batch_stats canopy_trace_batch(canopy_scene const& s, std::span<ray const> rays, bool closest, Isect& isect,
+                               std::span<basic_hit_record<float>> out) {
+    if (s.instanced)
+        return closest ? closest_hit(rays, &s.top, &s.top + 1, out, isect) : any_hit(rays, &s.top, &s.top + 1, out, isect);
+    return closest ? closest_hit(rays, &s.mesh, &s.mesh + 1, out, isect) : any_hit(rays, &s.mesh, &s.mesh + 1, out, isect);
+}
+
 template <typename Isect>
 bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect& isect) {
     basic_hit_record<float> hr;
@@ -64,7 +74,8 @@ bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect&
 }
 
 // Counts the tests a query makes through `Inner` (whose triangle test it calls). Its box hook is
-// called once per box instead of the 8-wide SIMD test, so it is never timed.
+// called once per box instead of the 8-wide SIMD test, so it is never timed. With packets (batch
+// queries) each count is one test of a packet's 8 lanes.
 template <typename Inner>
 struct counting_intersector : basic_intersector<counting_intersector<Inner>> {
     using basic_intersector<counting_intersector<Inner>>::operator();
@@ -81,9 +92,9 @@ struct counting_intersector : basic_intersector<counting_intersector<Inner>> {
         return test_primitive(inner, ray, tri);
     }
 
-    template <typename Ray>
+    template <typename Ray, typename T>
         requires filter_hook_for<Inner, Ray>
-    bool filter(Ray const& ray, basic_hit_record<float> const& hr) {
+    auto filter(Ray const& ray, basic_hit_record<T> const& hr) {
         return inner.filter(ray, hr);
     }
 

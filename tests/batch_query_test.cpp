@@ -136,6 +136,15 @@ struct scalar_only_hook : canopy::basic_intersector<scalar_only_hook> {
         return intersect(r, tri);
     }
 };
+struct scalar_template_hook : canopy::basic_intersector<scalar_template_hook> {
+    using canopy::basic_intersector<scalar_template_hook>::operator();
+    template <typename Ray>
+    record operator()(Ray const& r, triangle const& tri) {
+        auto hr = intersect(r, tri);
+        hr.hit = hr.hit && checkerboard_opaque(hr.u, hr.v);
+        return hr;
+    }
+};
 struct scalar_only_filter : canopy::basic_intersector<scalar_only_filter> {
     template <typename Ray>
     bool filter(Ray const&, record const& hr) const {
@@ -245,6 +254,10 @@ TEST_CASE("intersectors with hooks or filters for scalar rays only make the batc
     compare_everywhere(scalar_only_filter{}, coherent_filter, incoherent_filter);
     CHECK(coherent_filter.mismatches == 0);
     CHECK(coherent_filter.packets == 0);
+    tally coherent_template, incoherent_template;
+    compare_everywhere(scalar_template_hook{}, coherent_template, incoherent_template);
+    CHECK(coherent_template.mismatches == 0);
+    CHECK(coherent_template.packets == 0);
     // The hook is called once per triangle test of each ray, as in the single-ray queries.
     random_source rng(1403);
     scenes const s(rng);

@@ -32,8 +32,11 @@
 //   and for closest_hit the candidates a lane meets depend on the order in which the packet
 //   visits leaves (near to far for the packet, not for each lane): only the result is the same.
 // - An intersector that cannot take packets (hooks or a filter declared for canopy::ray or
-//   basic_hit_record<float> only) makes the batch trace every ray on its own, decided at compile
-//   time; so do structures whose boxes are not float.
+//   basic_hit_record<float> only, or a template hook whose declared return type is
+//   basic_hit_record<float>) makes the batch trace every ray on its own, decided at compile time;
+//   so do structures whose boxes are not float. A template hook with a deduced return type
+//   (`auto`) is taken to serve packets: its body must compile for them (lane by lane: hr.hit[k],
+//   hr.hit.set(k, ...)), as for the packet single-ray queries.
 // Each query returns batch_stats: how many packets and single rays it traced.
 module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and

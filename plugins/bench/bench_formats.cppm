@@ -93,14 +93,20 @@ struct bench_alpha_intersector : basic_intersector<bench_alpha_intersector> {
 };
 
 // The same rule written as the paper writes intersectors: a triangle hook, which the library
-// calls once per triangle (leaves are then tested one triangle at a time). Same hits.
+// calls once per triangle (leaves are then tested one triangle at a time). Same hits. For scalar
+// rays and packets.
 struct bench_alpha_hook_intersector : basic_intersector<bench_alpha_hook_intersector> {
     using basic_intersector<bench_alpha_hook_intersector>::operator();
 
     template <typename Ray>
     auto operator()(Ray const& ray, triangle const& tri) {
         auto hr = intersect(ray, tri);
-        if (hr.hit) hr.hit = !bench_alpha_intersector::rejects(hr.u, hr.v);
+        if constexpr (simd::simd_width_v<ray_value_t<Ray>> == 1) {
+            if (hr.hit) hr.hit = !bench_alpha_intersector::rejects(hr.u, hr.v);
+        } else {
+            for (int k = 0; k < simd::simd_width_v<ray_value_t<Ray>>; ++k)
+                if (hr.hit[k] && bench_alpha_intersector::rejects(hr.u[k], hr.v[k])) hr.hit.set(k, false);
+        }
         return hr;
     }
 };
