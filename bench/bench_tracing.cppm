@@ -74,23 +74,26 @@ bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect&
 }
 
 // Counts the tests a query makes through `Inner` (whose triangle test it calls). Its box hook is
-// called once per box instead of the 8-wide SIMD test, so it is never timed. With packets (batch
-// queries) each count is one test of a packet's 8 lanes.
+// called once per box instead of the 8-wide SIMD test, so it is never timed. Tests of packets
+// (batch queries) are counted apart, once for the packet's 8 lanes.
 template <typename Inner>
 struct counting_intersector : basic_intersector<counting_intersector<Inner>> {
     using basic_intersector<counting_intersector<Inner>>::operator();
 
     template <typename Ray, typename... Args>
     auto operator()(Ray const& ray, aabb const& box, Args&&... args) {
-        ++boxes;
+        ++(is_packet<Ray> ? packet_boxes : boxes);
         return intersect(ray, box, std::forward<Args>(args)...);
     }
 
     template <typename Ray>
     auto operator()(Ray const& ray, triangle const& tri) {
-        ++triangles;
+        ++(is_packet<Ray> ? packet_triangles : triangles);
         return test_primitive(inner, ray, tri);
     }
+
+    template <typename Ray>
+    static constexpr bool is_packet = simd::simd_width_v<ray_value_t<Ray>> > 1;
 
     template <typename Ray, typename T>
         requires filter_hook_for<Inner, Ray>
@@ -101,6 +104,8 @@ struct counting_intersector : basic_intersector<counting_intersector<Inner>> {
     Inner inner;
     std::uint64_t boxes = 0;
     std::uint64_t triangles = 0;
+    std::uint64_t packet_boxes = 0;     // tests of packets (8 lanes each)
+    std::uint64_t packet_triangles = 0;
 };
 
 struct ray_set {

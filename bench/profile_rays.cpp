@@ -12,8 +12,8 @@
 // tests per ray. The mesh BVH is built at --quality (default fast; high: spatial splits, with
 // --split-budget, default 0.3); its statistics line gives the references its leaves hold, its SAH
 // cost and its build time. --batch traces the set through the batch queries (canopy.query:batch,
-// packets of 8 coherent rays) instead, and prints how many packets and single rays they traced and
-// the tests of both ways (a packet's box or triangle test counts once for its 8 lanes).
+// packets of 8 coherent rays) instead, and prints how many packets and single rays they traced, with
+// the tests per packet (one box or triangle test for its 8 lanes) and per single ray.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -67,9 +67,13 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
         counting_intersector<Isect> packed;
         std::vector<canopy::basic_hit_record<float>> out(rays.size());
         auto const stats = canopy_trace_batch(s, rays, closest, packed, out);
-        std::printf("batch: %zu packets of 8, %zu single rays; %.2f box tests/ray, %.2f triangle tests/ray "
-                    "(a packet's test counted once)\n",
-                    stats.packets, stats.single_rays, double(packed.boxes) / n, double(packed.triangles) / n);
+        double const p = double(stats.packets);
+        std::printf("batch: %zu packets of 8, %zu single rays; per packet %.2f box tests, %.2f triangle tests; "
+                    "per single ray %.2f box tests, %.2f triangle tests\n",
+                    stats.packets, stats.single_rays, p > 0 ? double(packed.packet_boxes) / p : 0.0,
+                    p > 0 ? double(packed.packet_triangles) / p : 0.0,
+                    stats.single_rays > 0 ? double(packed.boxes) / double(stats.single_rays) : 0.0,
+                    stats.single_rays > 0 ? double(packed.triangles) / double(stats.single_rays) : 0.0);
     }
     return 0;
 }
