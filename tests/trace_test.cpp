@@ -359,7 +359,7 @@ std::vector<canopy::ray> make_camera_rays(canopy::aabb const& bounds) {
 
 } // namespace
 
-TEST_CASE("canopy trace --mode batch writes the hit file of --mode single, byte for byte; --reps times passes") {
+TEST_CASE("canopy trace --mode batch writes the hit file of --mode single, byte for byte, and --reps times passes") {
     trace_fixture const f;
     // Camera rays (packets), then the fixture's random rays (single rays): closest hit with the
     // alpha rule through the instanced scene, any hit without an intersector through the mesh.
