@@ -18,9 +18,10 @@
 // (canopy.scene's skip rules) and rendered with the scene's camera and lights when it has them.
 // `canopy trace` reads the benchmark formats (.obj subset: one BVH, no top level; .inst: one shared
 // mesh instanced under a top-level BVH); rays and hits use the benchmark formats too. It traces one
-// ray at a time (--mode single, the default: the batch queries' packets test more boxes than the
-// rays they hold would alone on the bench's ray sets, see the README) or through the batch queries
-// (--mode batch: groups of 8 coherent rays as packets); the hit files are the same byte for byte.
+// ray at a time (--mode single, the default: counted in SIMD operations, the batch queries' packets
+// do more work than their rays alone on most bench scenes, see the README) or through the batch
+// queries (--mode batch: groups of 8 coherent rays as packets); the hit files are the same byte
+// for byte.
 //
 // Exit status: 0 success; 1 an error in an input, an output or a limit (the message names the
 // file and the problem); 2 a usage error (unknown, missing, repeated or malformed option, followed
@@ -368,7 +369,7 @@ decltype(auto) on_root(loaded_scene const& scene, Query&& q) {
 // (returning how many packets they traced).
 template <typename Isect>
 std::size_t trace_rays(loaded_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> out,
-                bool closest, bool batch, Isect& isect) {
+                       bool closest, bool batch, Isect& isect) {
     if (!batch) {
         for (std::size_t i = 0; i < rays.size(); ++i)
             out[i] = to_bench_hit(on_root(scene, [&](auto first, auto last) {
