@@ -21,18 +21,14 @@
 // - Results are bit-identical to the single-ray queries (hit, t, u, v, prim_id, geom_id, inst_id,
 //   inner_inst_id): a packet tests each lane with the single ray's arithmetic, its box tests are
 //   conservative for every lane, and the closest hit does not depend on traversal order
-//   (canopy.query:single, equal-t rule). any_hit too: a packet visits, in the same order, a
-//   superset of the leaves each of its rays visits alone (depth first, children in slot order),
-//   and the extra ones hold no candidate for that lane (the box test culled them for it); so each
-//   lane meets the same candidates in the same order, up to its first accepted one. Except in
-//   BVHs built with spatial splits (build_quality::high): a leaf's box then bounds only part of a
-//   triangle, and a lane may hit that triangle in a leaf it would not visit alone, earlier than
-//   the single ray's first hit. There any_hit reports the same hit or miss, and a hit the single
-//   ray also has, but not necessarily the same one (closest_hit and multi_hit stay identical).
+//   (canopy.query:single, equal-t rule). any_hit too: a packet tests a leaf only for the lanes
+//   that hit every box on the way to it (canopy.bvh:traverse), and any-hit traversal is depth
+//   first with children in slot order; so each lane meets the leaves it would meet alone, in the
+//   same order, and the same first accepted hit (also in BVHs built with spatial splits).
 // - Intersectors: hooks and filters see packets (prepared_ray<simd::float8>), so every test of
-//   every active lane goes through them. For any_hit (BVHs built fast), a filter or triangle hook
-//   sees, lane by lane, the candidates (hit lanes) it would see for the single ray, in the same
-//   order: hit counts summed over lanes equal the single-ray counts. Call counts are per packet, not per ray,
+//   every active lane goes through them. For any_hit, a filter or triangle hook sees, lane by
+//   lane, the candidates (hit lanes) it would see for the single ray, in the same order: hit
+//   counts summed over lanes equal the single-ray counts. Call counts are per packet, not per ray,
 //   and for closest_hit the candidates a lane meets depend on the order in which the packet
 //   visits leaves (near to far for the packet, not for each lane): only the result is the same.
 // - An intersector that cannot take packets (hooks or a filter declared for canopy::ray or
