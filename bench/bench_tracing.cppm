@@ -11,6 +11,7 @@ module;
 #include <limits>
 #include <memory>
 #include <random>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -53,6 +54,15 @@ inline bool parse_quality(std::string const& name, build_quality& quality) {
     return true;
 }
 
+// The batch queries (canopy.query:batch) over all of `rays`.
+template <typename Isect>
+batch_stats canopy_trace_batch(canopy_scene const& s, std::span<ray const> rays, bool closest, Isect& isect,
+                               std::span<basic_hit_record<float>> out) {
+    if (s.instanced)
+        return closest ? closest_hit(rays, &s.top, &s.top + 1, out, isect) : any_hit(rays, &s.top, &s.top + 1, out, isect);
+    return closest ? closest_hit(rays, &s.mesh, &s.mesh + 1, out, isect) : any_hit(rays, &s.mesh, &s.mesh + 1, out, isect);
+}
+
 template <typename Isect>
 bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect& isect) {
     basic_hit_record<float> hr;
@@ -65,32 +75,38 @@ bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect&
 }
 
 // Counts the tests a query makes through `Inner` (whose triangle test it calls). Its box hook is
-// called once per box instead of the 8-wide SIMD test, so it is never timed.
+// called once per box instead of the 8-wide SIMD test, so it is never timed. Tests of packets
+// (batch queries) are counted apart, once for the packet's 8 lanes.
 template <typename Inner>
 struct counting_intersector : basic_intersector<counting_intersector<Inner>> {
     using basic_intersector<counting_intersector<Inner>>::operator();
 
     template <typename Ray, typename... Args>
     auto operator()(Ray const& ray, aabb const& box, Args&&... args) {
-        ++boxes;
+        ++(is_packet<Ray> ? packet_boxes : boxes);
         return intersect(ray, box, std::forward<Args>(args)...);
     }
 
     template <typename Ray>
     auto operator()(Ray const& ray, triangle const& tri) {
-        ++triangles;
+        ++(is_packet<Ray> ? packet_triangles : triangles);
         return test_primitive(inner, ray, tri);
     }
 
     template <typename Ray>
+    static constexpr bool is_packet = simd::simd_width_v<ray_value_t<Ray>> > 1;
+
+    template <typename Ray, typename T>
         requires filter_hook_for<Inner, Ray>
-    bool filter(Ray const& ray, basic_hit_record<float> const& hr) {
+    auto filter(Ray const& ray, basic_hit_record<T> const& hr) {
         return inner.filter(ray, hr);
     }
 
     Inner inner;
     std::uint64_t boxes = 0;
     std::uint64_t triangles = 0;
+    std::uint64_t packet_boxes = 0;     // tests of packets (8 lanes each)
+    std::uint64_t packet_triangles = 0;
 };
 
 struct ray_set {

@@ -2,7 +2,7 @@
 // callgrind counts instructions per ray (bench/profile.sh), perf samples where the time goes.
 //
 //   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]
-//                        [--quality automatic|fast|high] [--split-budget F]
+//                        [--quality automatic|fast|high] [--split-budget F] [--batch]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow        QUERY  closest | any
 //
@@ -11,7 +11,9 @@
 // (the fastest pass) and, from an untimed pass with a counting intersector, box and triangle
 // tests per ray. The mesh BVH is built at --quality (default fast; high: spatial splits, with
 // --split-budget, default 0.3); its statistics line gives the references its leaves hold, its SAH
-// cost and its build time.
+// cost and its build time. --batch traces the set through the batch queries (canopy.query:batch,
+// packets of 8 coherent rays) instead, and prints how many packets and single rays they traced, with
+// the tests per packet (one box or triangle test for its 8 lanes) and per single ray.
 #include <algorithm>
 #include <chrono>
 #include <span>
@@ -33,20 +35,28 @@ template <typename Isect>
     return hits;
 }
 
+template <typename Isect>
+[[gnu::noinline]] std::size_t trace_batch(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest,
+                                          Isect& isect) {
+    std::vector<canopy::basic_hit_record<float>> out(rays.size());
+    canopy_trace_batch(s, rays, closest, isect, out);
+    return std::size_t(std::count_if(out.begin(), out.end(), [](auto const& hr) { return bool(hr.hit); }));
+}
+
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--batch]\n",
                  program);
     return 2;
 }
 
 template <typename Isect>
-int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest, int passes) {
+int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest, int passes, bool batch) {
     Isect isect;
     std::size_t hits = 0;
     double seconds = 1e30;
     for (int p = 0; p < passes; ++p) {
         auto const start = std::chrono::steady_clock::now();
-        hits = trace_rays(s, rays, closest, isect);
+        hits = batch ? trace_batch(s, rays, closest, isect) : trace_rays(s, rays, closest, isect);
         seconds = std::min(seconds, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     }
     counting_intersector<Isect> counter;
@@ -54,6 +64,18 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
     double const n = double(rays.size());
     std::printf("rays %zu, hits %zu, %.1f ns/ray, %.2f box tests/ray, %.2f triangle tests/ray\n", rays.size(), hits,
                 seconds * 1e9 / n, double(counter.boxes) / n, double(counter.triangles) / n);
+    if (batch) {
+        counting_intersector<Isect> packed;
+        std::vector<canopy::basic_hit_record<float>> out(rays.size());
+        auto const stats = canopy_trace_batch(s, rays, closest, packed, out);
+        double const p = double(stats.packets);
+        std::printf("batch: %zu packets of 8, %zu single rays; per packet %.2f box tests, %.2f triangle tests; "
+                    "per single ray %.2f box tests, %.2f triangle tests\n",
+                    stats.packets, stats.single_rays, p > 0 ? double(packed.packet_boxes) / p : 0.0,
+                    p > 0 ? double(packed.packet_triangles) / p : 0.0,
+                    stats.single_rays > 0 ? double(packed.boxes) / double(stats.single_rays) : 0.0,
+                    stats.single_rays > 0 ? double(packed.triangles) / double(stats.single_rays) : 0.0);
+    }
     return 0;
 }
 
@@ -62,7 +84,7 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
 int main(int argc, char** argv) {
     if (argc < 4) return usage(argv[0]);
     std::string const scene_name = argv[1], set_name = argv[2], query = argv[3];
-    bool quick = false, alpha = false, alpha_hook = false;
+    bool quick = false, alpha = false, alpha_hook = false, batch = false;
     std::size_t count = 0;
     int passes = 1;
     canopy::bvh_build_options options;
@@ -71,6 +93,7 @@ int main(int argc, char** argv) {
         if (a == "--quick") quick = true;
         else if (a == "--alpha") alpha = true;
         else if (a == "--alpha-hook") alpha_hook = true;
+        else if (a == "--batch") batch = true;
         else if (a == "--count" && i + 1 < argc) count = std::size_t(std::atoll(argv[++i]));
         else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
         else if (a == "--quality" && i + 1 < argc) {
@@ -105,9 +128,9 @@ int main(int argc, char** argv) {
         if (set.name != set_name) continue;
         if (count != 0 && count < set.rays.size()) set.rays.resize(count);
         bool const closest = query == "closest";
-        if (alpha) return run<canopy::bench_alpha_intersector>(*s, set.rays, closest, passes);
-        if (alpha_hook) return run<canopy::bench_alpha_hook_intersector>(*s, set.rays, closest, passes);
-        return run<canopy::default_intersector>(*s, set.rays, closest, passes);
+        if (alpha) return run<canopy::bench_alpha_intersector>(*s, set.rays, closest, passes, batch);
+        if (alpha_hook) return run<canopy::bench_alpha_hook_intersector>(*s, set.rays, closest, passes, batch);
+        return run<canopy::default_intersector>(*s, set.rays, closest, passes, batch);
     }
     return usage(argv[0]);
 }

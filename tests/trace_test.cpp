@@ -336,6 +336,78 @@ TEST_CASE("canopy trace --query any agrees with the library's any_hit on hit or 
         }
 }
 
+namespace {
+
+// A pinhole camera outside the box looking at its centre, row by row (coherent rays: the batch
+// queries trace them as packets), then the degenerate rays.
+std::vector<canopy::ray> make_camera_rays(canopy::aabb const& bounds) {
+    vec3<float> const c = (bounds.min + bounds.max) * 0.5f;
+    float const extent = canopy::length(bounds.max - bounds.min);
+    vec3<float> const eye = c + vec3<float>(0.3f, 0.4f, 1.0f) * extent;
+    vec3<float> const forward = canopy::normalize(c - eye);
+    vec3<float> const right = canopy::normalize(canopy::cross(forward, vec3<float>(0, 1, 0)));
+    vec3<float> const up = canopy::cross(right, forward);
+    std::vector<canopy::ray> rays;
+    for (int j = 0; j < 30; ++j)
+        for (int i = 0; i < 41; ++i) {
+            float const x = (float(i) + 0.5f) / 41.0f - 0.5f, y = (float(j) + 0.5f) / 30.0f - 0.5f;
+            rays.push_back({eye, 0.0f, forward + right * (0.9f * x) + up * (0.9f * y), inf});
+        }
+    for (auto const& r : make_degenerate_rays(bounds)) rays.push_back(r);
+    return rays;
+}
+
+} // namespace
+
+TEST_CASE("canopy trace --mode batch writes the hit file of --mode single, byte for byte, and --reps times passes") {
+    trace_fixture const f;
+    // Camera rays (packets), then the fixture's random rays (single rays): closest hit with the
+    // alpha rule through the instanced scene, any hit without an intersector through the mesh.
+    for (bool const instanced : {true, false}) {
+        char const* const query = instanced ? "closest" : "any";
+        bool const alpha = instanced;
+        INFO((instanced ? "instanced .inst scene, closest, alpha" : "single-mesh .obj scene, any, no intersector"));
+        auto rays = make_camera_rays(instanced ? f.top.bounds() : f.mesh.bounds());
+        rays.insert(rays.end(), f.rays(instanced).begin(), f.rays(instanced).end());
+        fs::path const rays_file = f.folder.path / "camera.rays";
+        canopy::write_bench_rays(rays_file, rays);
+        std::string files[2];
+        for (int m = 0; m < 2; ++m) {
+            std::string const mode = m == 0 ? "single" : "batch";
+            fs::path const out = f.folder.path / (mode + ".hits");
+            std::vector<std::string> args{"trace", "--scene", f.scene_file(instanced).string(), "--rays",
+                                          rays_file.string(), "--query", query, "--out", out.string(), "--mode", mode,
+                                          "--reps", "2", "--threads", "2"};
+            if (alpha) args.insert(args.end(), {"--intersector", "alpha"});
+            auto const result = run_canopy(args);
+            INFO(result.output);
+            REQUIRE(result.exit_code == 0);
+            // Camera rays as packets: 41 × 30 rays, a few groups straddling a change of octant.
+            if (m == 1) {
+                auto const at = result.output.find("rays (batch: ");
+                REQUIRE(at != std::string::npos);
+                CHECK(std::stoul(result.output.substr(at + 13)) > 60);
+            }
+            CHECK_THAT(result.output, Catch::Contains("rays (" + mode) && Catch::Contains(") in ") &&
+                                          Catch::Contains("(median of 2 after a warm-up pass)") &&
+                                          Catch::Contains("Mrays/s"));
+            files[m] = read_bytes(out);
+            fs::remove(out);
+        }
+        REQUIRE(files[0].size() == 20 * rays.size());
+        CHECK(files[0] == files[1]);
+        // Both are the library's single-ray results.
+        int mismatches = 0, hits = 0;
+        for (std::size_t i = 0; i < rays.size(); ++i) {
+            auto const expected = f.reference(rays[i], instanced, instanced, alpha);
+            hits += expected.hit;
+            mismatches += files[1].compare(20 * i, 20, hit_bytes(expected)) != 0;
+        }
+        CHECK(mismatches == 0);
+        CHECK(hits > int(rays.size()) / 8);
+    }
+}
+
 TEST_CASE("canopy trace survives NaN and infinite rays and zero directions: they miss") {
     trace_fixture const f;
     for (bool const instanced : {false, true}) {
@@ -416,6 +488,10 @@ TEST_CASE("canopy gives a usage message and a non-zero exit for bad arguments") 
         {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "closest", "--out", out, "--intersector", "cheap"},
          "usage: canopy trace"},
         {{"trace", "--scene"}, "usage: canopy trace"},
+        {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "any", "--out", out, "--mode", "packet"},
+         "usage: canopy trace"},
+        {{"trace", "--scene", "a.obj", "--rays", "a.rays", "--query", "any", "--out", out, "--reps", "0"},
+         "usage: canopy trace"},
         {{"render", "--frobnicate", "3"}, "usage: canopy render"},
         {{"render", "--size", "big"}, "usage: canopy render"},
         {{"render", "--kernel", "raster"}, "usage: canopy render"},

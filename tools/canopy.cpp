@@ -5,9 +5,10 @@
 //                 [--exposure EV] [--tonemap none|reinhard|aces] [--threads N] [--plugin FILE]...
 //                 [--quality automatic|fast|high] [LIMITS]
 //   canopy trace --scene FILE --rays FILE --query closest|any --out FILE
-//                [--intersector none|alpha] [--threads N] [--quality automatic|fast|high] [LIMITS]
+//                [--intersector none|alpha] [--mode single|batch] [--reps N] [--threads N]
+//                [--quality automatic|fast|high] [LIMITS]
 //   canopy info SCENE [--quality automatic|fast|high] | --plugins [--plugin FILE]... [LIMITS]
-//   --quality: the build quality of the mesh BVHs (canopy::build_quality; default fast).
+//   --quality: the build quality of the mesh BVHs (canopy::build_quality; default automatic).
 //   LIMITS: [--max-file-bytes N] [--max-texels N] [--max-total-texels N] [--max-triangles N]
 //           [--max-placements N] [--max-depth N]  (canopy::resource_limits, set before anything
 //           is loaded)
@@ -18,7 +19,11 @@
 // gen:NAME[:KEY=VALUE,...] for a registered generator, is loaded into the scene graph, compiled
 // (canopy.scene's skip rules) and rendered with the scene's camera and lights when it has them.
 // `canopy trace` reads the benchmark formats (.obj subset: one BVH, no top level; .inst: one shared
-// mesh instanced under a top-level BVH); rays and hits use the benchmark formats too.
+// mesh instanced under a top-level BVH); rays and hits use the benchmark formats too. It traces one
+// ray at a time (--mode single, the default: counted in SIMD operations, the batch queries' packets
+// do more work than their rays alone on most bench scenes, see the README) or through the batch
+// queries (--mode batch: groups of 8 coherent rays as packets); the hit files are the same byte
+// for byte.
 //
 // Exit status: 0 success; 1 an error in an input, an output or a limit (the message names the
 // file and the problem); 2 a usage error (unknown, missing, repeated or malformed option, followed
@@ -26,6 +31,7 @@
 // before any work (the folder is created, each file opened for writing) and again after closing;
 // standard output is checked at exit.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <charconv>
 #include <chrono>
@@ -102,12 +108,17 @@ constexpr char const* limits_usage =
 
 constexpr char const* trace_options_usage =
     "usage: canopy trace --scene FILE --rays FILE --query closest|any --out FILE\n"
-    "                    [--intersector none|alpha] [--threads N] [--quality Q] [limits]\n"
+    "                    [--intersector none|alpha] [--mode single|batch] [--reps N]\n"
+    "                    [--threads N] [--quality Q] [limits]\n"
     "  --scene FILE        .obj (single mesh) or .inst (instanced mesh)\n"
     "  --rays FILE         32-byte rays: origin, tmin, direction, tmax (float32); at least one\n"
     "  --query KIND        closest: nearest accepted hit; any: first accepted hit\n"
     "  --out FILE          20-byte hits: t, prim, inst, u, v (checked writable before tracing)\n"
     "  --intersector KIND  none (default) or alpha: reject hits where floor(8u)+floor(8v) is odd\n"
+    "  --mode MODE         single (default): one ray at a time; batch: the batch queries, which\n"
+    "                      trace groups of 8 coherent rays as packets (same hits, byte for byte)\n"
+    "  --reps N            one warm-up pass, then N timed passes, 1 to 1000; the median is\n"
+    "                      printed (default: one timed pass, no warm-up)\n"
     "  --threads N         worker threads, 1 to 1024 (default: all cores)\n";
 
 constexpr char const* render_options_usage =
@@ -369,23 +380,45 @@ std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path
     return scene;
 }
 
-template <typename Isect>
-canopy::bench_hit trace_one(loaded_scene const& scene, canopy::ray const& r, bool closest, Isect& isect) {
-    canopy::basic_hit_record<float> hr;
-    if (scene.instanced) {
-        hr = closest ? canopy::closest_hit(r, &scene.top, &scene.top + 1, isect)
-                     : canopy::any_hit(r, &scene.top, &scene.top + 1, isect);
-    } else {
-        hr = closest ? canopy::closest_hit(r, &scene.mesh, &scene.mesh + 1, isect)
-                     : canopy::any_hit(r, &scene.mesh, &scene.mesh + 1, isect);
-    }
+// Rays per task of `trace` (a multiple of the batch queries' groups of 8).
+constexpr std::size_t trace_chunk = 256;
+
+canopy::bench_hit to_bench_hit(canopy::basic_hit_record<float> const& hr) {
     if (!hr.hit) return {};
     return {hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v};
 }
 
+// One query over the scene's root: q(first, last) with the BVH of the mesh or of the instances.
+template <typename Query>
+decltype(auto) on_root(loaded_scene const& scene, Query&& q) {
+    return scene.instanced ? q(&scene.top, &scene.top + 1) : q(&scene.mesh, &scene.mesh + 1);
+}
+
+// Rays [first, first + out.size()) into out: one at a time, or through the batch queries
+// (returning how many packets they traced).
+template <typename Isect>
+std::size_t trace_rays(loaded_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> out,
+                       bool closest, bool batch, Isect& isect) {
+    if (!batch) {
+        for (std::size_t i = 0; i < rays.size(); ++i)
+            out[i] = to_bench_hit(on_root(scene, [&](auto first, auto last) {
+                return closest ? canopy::closest_hit(rays[i], first, last, isect)
+                               : canopy::any_hit(rays[i], first, last, isect);
+            }));
+        return 0;
+    }
+    std::array<canopy::basic_hit_record<float>, trace_chunk> records;
+    std::span<canopy::basic_hit_record<float>> const got(records.data(), rays.size());
+    auto const stats = on_root(scene, [&](auto first, auto last) {
+        return closest ? canopy::closest_hit(rays, first, last, got, isect) : canopy::any_hit(rays, first, last, got, isect);
+    });
+    for (std::size_t i = 0; i < rays.size(); ++i) out[i] = to_bench_hit(got[i]);
+    return stats.packets;
+}
+
 int run_trace(std::span<char*> all_args) {
-    arguments const args = parse_arguments(
-        all_args, {{"--scene"}, {"--rays"}, {"--query"}, {"--out"}, {"--intersector"}, {"--threads"}, {"--quality"}});
+    arguments const args = parse_arguments(all_args, {{"--scene"}, {"--rays"}, {"--query"}, {"--out"}, {"--intersector"},
+                                                      {"--mode"}, {"--reps"}, {"--threads"}, {"--quality"}});
     if (args.help) {
         std::fputs(trace_usage.c_str(), stdout);
         return 0;
@@ -403,6 +436,9 @@ int run_trace(std::span<char*> all_args) {
     if (isect_name != "none" && isect_name != "alpha")
         throw usage_error("--intersector must be none or alpha, not " + quote(isect_name));
     canopy::build_quality const quality = quality_option(args);
+    std::string const mode = args.value_or("--mode", "single");
+    if (mode != "single" && mode != "batch") throw usage_error("--mode must be single or batch, not " + quote(mode));
+    int const reps = args.has("--reps") ? int(whole_option(args, "--reps", 1, 1000)) : 0;
 
     check_writable(out_path);
     auto const scene = load_bench_scene(scene_path, quality);
@@ -414,24 +450,54 @@ int run_trace(std::span<char*> all_args) {
     std::vector<canopy::bench_hit> hits(rays.size());
     bool const closest = query == "closest";
 
-    auto const start = clock_type::now();
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), 256), [&](auto const& range) {
-        canopy::default_intersector none;
-        canopy::bench_alpha_intersector alpha;
-        for (std::size_t i = range.begin(); i != range.end(); ++i)
-            hits[i] = isect_name == "alpha" ? trace_one(*scene, rays[i], closest, alpha)
-                                            : trace_one(*scene, rays[i], closest, none);
-    });
-    double const trace_seconds = seconds_since(start);
+    bool const batch = mode == "batch";
+    // Chunks of trace_chunk rays (a multiple of 8: the batch queries' groups are the same whatever
+    // the threads), as many as the threads take.
+    std::size_t const chunks = (rays.size() + trace_chunk - 1) / trace_chunk;
+    std::atomic<std::size_t> packets{0};
+    auto const pass = [&] {
+        packets = 0;
+        auto const start = clock_type::now();
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](auto const& range) {
+            canopy::default_intersector none;
+            canopy::bench_alpha_intersector alpha;
+            std::size_t n = 0;
+            for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                std::size_t const first = c * trace_chunk, count = std::min(trace_chunk, rays.size() - first);
+                std::span<canopy::ray const> const in(rays.data() + first, count);
+                std::span<canopy::bench_hit> const out(hits.data() + first, count);
+                n += isect_name == "alpha" ? trace_rays(*scene, in, out, closest, batch, alpha)
+                                           : trace_rays(*scene, in, out, closest, batch, none);
+            }
+            packets += n;
+        });
+        return seconds_since(start);
+    };
+    double trace_seconds = 0.0;
+    if (reps == 0) {
+        trace_seconds = pass();
+    } else {
+        pass(); // warm-up
+        std::vector<double> times;
+        for (int r = 0; r < reps; ++r) times.push_back(pass());
+        std::sort(times.begin(), times.end());
+        std::size_t const mid = times.size() / 2;
+        trace_seconds = times.size() % 2 == 1 ? times[mid] : 0.5 * (times[mid - 1] + times[mid]);
+    }
     step("writing " + out_path);
     canopy::write_bench_hits(out_path, hits);
 
     std::size_t const hit_count = std::size_t(std::count_if(hits.begin(), hits.end(), [](auto const& h) {
         return h.prim != canopy::invalid_id;
     }));
-    fmt::print("build {:.3f} ms at quality {}, trace {} rays in {:.3f} ms: {:.2f} Mrays/s, {} hits\n",
-               scene->build_seconds * 1e3, quality_used(quality, scene->mesh.quality),
-               rays.size(), trace_seconds * 1e3, trace_seconds > 0 ? double(rays.size()) / trace_seconds * 1e-6 : 0.0,
+    std::string const timing =
+        reps == 0 ? std::string() : fmt::format(" (median of {} after a warm-up pass)", reps);
+    std::string const how = batch ? fmt::format("batch: {} packets of 8, {} single rays", packets.load(),
+                                                rays.size() - 8 * packets.load())
+                                  : mode;
+    fmt::print("build {:.3f} ms at quality {}, trace {} rays ({}) in {:.3f} ms{}: {:.2f} Mrays/s, {} hits\n",
+               scene->build_seconds * 1e3, quality_used(quality, scene->mesh.quality), rays.size(), how,
+               trace_seconds * 1e3, timing, trace_seconds > 0 ? double(rays.size()) / trace_seconds * 1e-6 : 0.0,
                hit_count);
     return 0;
 }

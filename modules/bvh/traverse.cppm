@@ -2,7 +2,8 @@
 // and query.
 //
 // Each visited node tests its children's boxes, nearest hit child first, the others pushed far to
-// near (queries that stop at any hit, Query::wants_near_first == false, skip the ordering). Which
+// near (queries that stop at any hit, Query::wants_near_first == false, visit them in slot order
+// instead). Which
 // box test runs is decided at compile time (node_tester):
 // - the intersector has its own box hook → the hook, once per child box (it sees every test);
 // - otherwise, scalar float rays → all eight boxes in one SIMD slab test (no per-box calls), with
@@ -17,7 +18,9 @@
 // Every primitive goes through call_hooks_or_descend (canopy.intersector): nested BVHs and
 // instances receive the same intersector and query; the leaves of triangle BVHs are blocks of four
 // triangles. Stacked entries whose entry distance lies beyond the ray's current tmax are skipped
-// (closest-hit culling). Packet rays visit a child when any active lane hits it. The memory of
+// (closest-hit culling). Packet rays visit a child when a lane that reached the node hits it, and
+// test a leaf's primitives only for the lanes that reached it (the others get tmax −inf there): each
+// lane meets the leaves it would meet alone, in the same order for any hit. The memory of
 // every hit child is prefetched as soon as the node test is done, so that cache misses overlap
 // (incoherent rays in large BVHs are memory-bound).
 module;
@@ -68,12 +71,19 @@ struct bvh_storage {
 
 namespace detail {
 
+// The lanes of a packet that reached a node (bit k: lane k hit every box on the way); nothing for
+// scalar rays.
+struct no_lanes {};
+template <typename T>
+using lanes_t = std::conditional_t<simd::simd_width_v<T> == 1, no_lanes, std::uint32_t>;
+
 // Hit children of a wide node: bit i of mask set when child i is hit, entry distance in tnear[i]
-// (for packets: the smallest over the lanes that hit it).
-template <typename S>
+// (for packets: the smallest over the lanes that hit it, and in lanes[i] those lanes).
+template <typename S, typename L = no_lanes>
 struct child_hits {
     std::uint32_t mask = 0;
     std::array<S, bvh_width> tnear;
+    [[no_unique_address]] std::conditional_t<std::is_same_v<L, no_lanes>, no_lanes, std::array<L, bvh_width>> lanes;
 };
 
 // The constants of the 8-wide box test for one scalar float ray, computed once per BVH: in every
@@ -154,20 +164,27 @@ template <bool Fused>
     return h;
 }
 
-// Child boxes one at a time through test_box (hook or default).
+// Child boxes one at a time through test_box (hook or default). A packet's child is hit by the
+// lanes that reached the node (`lanes`) and hit its box: the others, as alone, never enter it.
 template <typename T, typename S, typename I>
-[[gnu::always_inline]] inline child_hits<S> test_children_each(prepared_ray<T> const& ray,
-                                                              wide_bvh_node<S> const& node, I& isect) {
-    child_hits<S> h;
+[[gnu::always_inline]] inline child_hits<S, lanes_t<T>> test_children_each(prepared_ray<T> const& ray,
+                                                                          wide_bvh_node<S> const& node, I& isect,
+                                                                          lanes_t<T> lanes) {
+    child_hits<S, lanes_t<T>> h;
     for (int i = 0; i < bvh_width && node.used(i); ++i) {
         auto const box = test_box(isect, ray, node.child_bounds(i), ray.inv_dir);
-        if (simd::none(box.hit)) continue;
-        h.mask |= 1u << i;
-        if constexpr (simd::simd_width_v<T> == 1)
+        if constexpr (simd::simd_width_v<T> == 1) {
+            if (!box.hit) continue;
+            h.mask |= 1u << i;
             h.tnear[std::size_t(i)] = box.tnear;
-        else
-            h.tnear[std::size_t(i)] =
-                simd::reduce_min(simd::select(box.hit, box.tnear, T(std::numeric_limits<S>::infinity())));
+        } else {
+            std::uint32_t const hit_lanes = simd::movemask(box.hit) & lanes;
+            if (hit_lanes == 0) continue;
+            h.mask |= 1u << i;
+            h.lanes[std::size_t(i)] = hit_lanes;
+            h.tnear[std::size_t(i)] = simd::reduce_min(simd::select(simd::mask_type_t<T>::from_bits(hit_lanes), box.tnear,
+                                                                    T(std::numeric_limits<S>::infinity())));
+        }
     }
     return h;
 }
@@ -192,7 +209,9 @@ template <typename T, typename S, typename I, bool Fused = false>
 struct node_tester {
     node_tester(prepared_ray<T> const& r, I& i) : ray(r), isect(i) {}
 
-    child_hits<S> test(wide_bvh_node<S> const& node) { return test_children_each(ray, node, isect); }
+    child_hits<S, lanes_t<T>> test(wide_bvh_node<S> const& node, lanes_t<T> lanes) {
+        return test_children_each(ray, node, isect, lanes);
+    }
     S box_tmax() const { return box_test_tmax(widest_tmax(ray.tmax)); }
     void tmax_changed() {}
 
@@ -205,7 +224,7 @@ template <typename T, typename S, typename I, bool Fused>
 struct node_tester<T, S, I, Fused> {
     node_tester(prepared_ray<float> const& r, I&) : ray(r), box_ray(r) {}
 
-    [[gnu::always_inline]] child_hits<float> test(wide_bvh_node<float> const& node) const {
+    [[gnu::always_inline]] child_hits<float> test(wide_bvh_node<float> const& node, no_lanes) const {
         return test_children_wide(box_ray, node);
     }
     float box_tmax() const { return box_ray.box_tmax; }
@@ -241,23 +260,25 @@ template <typename Prim, typename S>
     }
 }
 
-// One pending child: a wide node (count 0) or a leaf, with the distance at which the ray enters it.
-template <typename S>
+// One pending child: a wide node (count 0) or a leaf, with the distance at which the ray enters it
+// (and, for packets, the lanes that enter it).
+template <typename S, typename L = no_lanes>
 struct traversal_entry {
     std::uint32_t child;
     std::uint32_t count; // 0: wide node; ≥ 1: leaf
     S tnear;
+    [[no_unique_address]] L lanes{};
 };
 
 // The pending children of one traversal. Depth never exceeds bvh_max_depth, and each level
 // pushes at most bvh_width - 1 entries.
-template <typename S>
+template <typename S, typename L = no_lanes>
 struct traversal_stack {
-    void push(traversal_entry<S> const& e) { entries[std::size_t(size++)] = e; }
+    void push(traversal_entry<S, L> const& e) { entries[std::size_t(size++)] = e; }
 
     // Pops into `next` the most recent entry that the ray still enters before box_tmax; false
     // when none is left.
-    bool pop_nearer_than(S box_tmax, traversal_entry<S>& next) {
+    bool pop_nearer_than(S box_tmax, traversal_entry<S, L>& next) {
         while (size > 0) {
             auto const& e = entries[std::size_t(--size)];
             if (e.tnear <= box_tmax) {
@@ -268,25 +289,36 @@ struct traversal_stack {
         return false;
     }
 
-    std::array<traversal_entry<S>, (bvh_width - 1) * bvh_max_depth + 1> entries;
+    std::array<traversal_entry<S, L>, (bvh_width - 1) * bvh_max_depth + 1> entries;
     int size = 0;
 };
 
 // The hit children of `node` in visiting order: returns the first to visit and pushes the
 // others so that they pop in order. Near to far when the query wants it (closest, multi hit; as
 // Embree's traverseClosestHit: one and two children without sorting, more sorted by insertion
-// straight into the stack, farthest deepest); else in slot order (any hit: every hit child is
-// visited until one primitive is hit).
-template <bool near_first, typename S>
-[[gnu::always_inline]] inline traversal_entry<S> order_children(wide_bvh_node<S> const& node, child_hits<S> const& hits,
-                                                                traversal_stack<S>& stack) {
+// straight into the stack, farthest deepest); else in increasing slot order (any hit: every hit
+// child is visited until one primitive is hit). Slot order makes any-hit traversal a depth-first
+// walk in one fixed order, whichever children a ray hits: a packet visits the leaves each of its
+// lanes would visit alone in the same relative order, so each lane finds the same first hit
+// (canopy.query:batch).
+template <bool near_first, typename S, typename L>
+[[gnu::always_inline]] inline traversal_entry<S, L> order_children(wide_bvh_node<S> const& node,
+                                                                   child_hits<S, L> const& hits,
+                                                                   traversal_stack<S, L>& stack) {
     auto const entry = [&](std::uint32_t i) {
-        return traversal_entry<S>{node.child[i], node.count[i], hits.tnear[i]};
+        traversal_entry<S, L> e{node.child[i], node.count[i], hits.tnear[i]};
+        if constexpr (!std::is_same_v<L, no_lanes>) e.lanes = hits.lanes[i];
+        return e;
     };
     std::uint32_t const first = std::uint32_t(std::countr_zero(hits.mask));
     std::uint32_t rest = hits.mask & (hits.mask - 1);
     if constexpr (!near_first) {
-        for (; rest != 0; rest &= rest - 1) stack.push(entry(std::uint32_t(std::countr_zero(rest))));
+        // Pushed from the highest slot down: they pop in increasing slot order.
+        for (; rest != 0;) {
+            auto const i = std::uint32_t(31 - std::countl_zero(rest));
+            stack.push(entry(i));
+            rest &= ~(1u << i);
+        }
         return entry(first);
     } else {
         auto const one = entry(first);
@@ -340,20 +372,32 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
 [[gnu::always_inline]] inline bool traverse_with(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect,
                                                  Query& query) {
     using S = typename bvh<Prim>::value_type;
+    using L = lanes_t<T>;
     Tester nodes(ray, isect);
-    traversal_stack<S> stack;
-    traversal_entry<S> current{0, 0, S(0)};
+    traversal_stack<S, L> stack;
+    traversal_entry<S, L> current{0, 0, S(0)};
+    if constexpr (!std::is_same_v<L, no_lanes>) current.lanes = (1u << simd::simd_width_v<T>) - 1u;
     for (;;) {
         if (current.count == 0) {
             auto const& node = b.wide_nodes[current.child];
-            auto const hits = nodes.test(node);
+            auto const hits = nodes.test(node, current.lanes);
             if (hits.mask != 0) {
                 prefetch_children(b, node, hits.mask);
                 current = order_children<Query::wants_near_first>(node, hits, stack);
                 continue;
             }
-        } else {
+        } else if constexpr (std::is_same_v<L, no_lanes>) {
             if (visit_leaf(ray, b, current.child, current.count, isect, query)) return true;
+            nodes.tmax_changed();
+        } else {
+            // Lanes that did not reach the leaf take no part in it (tmax −inf: every test misses),
+            // as they would not alone.
+            auto const outside = !simd::mask_type_t<T>::from_bits(current.lanes);
+            T const saved = ray.tmax;
+            ray.tmax = simd::select(outside, T(-std::numeric_limits<simd::scalar_type_t<T>>::infinity()), ray.tmax);
+            bool const stop = visit_leaf(ray, b, current.child, current.count, isect, query);
+            ray.tmax = simd::select(outside, saved, ray.tmax);
+            if (stop) return true;
             nodes.tmax_changed();
         }
         if (!stack.pop_nearer_than(nodes.box_tmax(), current)) return false;

@@ -72,10 +72,17 @@ struct bench_hit {
 // The alpha rule of the formats (`--intersector alpha`): on every candidate hit, clamp u and v to
 // [0, 1] and reject the candidate when floor(8u) + floor(8v) is odd; traversal goes on. A filter
 // (canopy.intersector): the library keeps its SIMD leaf test and asks only about candidates.
+// For scalar rays and for packets (lane by lane), so that batch queries can trace packets.
 struct bench_alpha_intersector : basic_intersector<bench_alpha_intersector> {
-    template <typename Ray>
-    bool filter(Ray const&, basic_hit_record<float> const& hr) const {
-        return !rejects(hr.u, hr.v);
+    template <typename Ray, typename T>
+    simd::mask_type_t<T> filter(Ray const&, basic_hit_record<T> const& hr) const {
+        if constexpr (simd::simd_width_v<T> == 1) {
+            return !rejects(hr.u, hr.v);
+        } else {
+            simd::mask_type_t<T> keep;
+            for (int k = 0; k < simd::simd_width_v<T>; ++k) keep.set(k, !rejects(hr.u[k], hr.v[k]));
+            return keep;
+        }
     }
 
     static inline bool rejects(float u, float v) {
@@ -86,14 +93,20 @@ struct bench_alpha_intersector : basic_intersector<bench_alpha_intersector> {
 };
 
 // The same rule written as the paper writes intersectors: a triangle hook, which the library
-// calls once per triangle (leaves are then tested one triangle at a time). Same hits.
+// calls once per triangle (leaves are then tested one triangle at a time). Same hits. For scalar
+// rays and packets.
 struct bench_alpha_hook_intersector : basic_intersector<bench_alpha_hook_intersector> {
     using basic_intersector<bench_alpha_hook_intersector>::operator();
 
     template <typename Ray>
     auto operator()(Ray const& ray, triangle const& tri) {
         auto hr = intersect(ray, tri);
-        if (hr.hit) hr.hit = !bench_alpha_intersector::rejects(hr.u, hr.v);
+        if constexpr (simd::simd_width_v<ray_value_t<Ray>> == 1) {
+            if (hr.hit) hr.hit = !bench_alpha_intersector::rejects(hr.u, hr.v);
+        } else {
+            for (int k = 0; k < simd::simd_width_v<ray_value_t<Ray>>; ++k)
+                if (hr.hit[k] && bench_alpha_intersector::rejects(hr.u[k], hr.v[k])) hr.hit.set(k, false);
+        }
         return hr;
     }
 };

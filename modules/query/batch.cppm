@@ -1,0 +1,242 @@
+// canopy.query:batch — the queries over a span of scalar float rays: closest_hit and any_hit
+// trace runs of 8 consecutive coherent rays as one packet (basic_ray<simd::float8>), the others
+// one at a time; multi_hit<N> traces every ray on its own.
+//
+//   std::vector<canopy::ray> rays = ...;
+//   std::vector<canopy::hit_record<canopy::ray, canopy::triangle>> hits(rays.size());
+//   canopy::closest_hit(rays, &mesh, &mesh + 1, hits);          // optional intersector last
+//
+// The decision is made per group of 8 (rays [8k, 8k + 8)); a shorter tail goes one at a time. A
+// group is a packet when
+// - at least two of its rays take part (finite origin and direction, tmin ≤ tmax; the others are
+//   inactive lanes and miss, as they do on their own),
+// - their directions share one octant (the sign bits of x, y and z agree; −0 counts as negative,
+//   as in the box test), and
+// - their origins lie within a box whose sides are at most batch_origin_spread (1/64) of the
+//   largest side of the bounds of [first, last) (camera rays: one origin; shadow rays from
+//   neighbouring pixels: close origins).
+// The test reads the 8 rays once: it costs far less than tracing them.
+//
+// Guarantees:
+// - Results are bit-identical to the single-ray queries (hit, t, u, v, prim_id, geom_id, inst_id,
+//   inner_inst_id): a packet tests each lane with the single ray's arithmetic, its box tests are
+//   conservative for every lane, and the closest hit does not depend on traversal order
+//   (canopy.query:single, equal-t rule). any_hit too: a packet tests a leaf only for the lanes
+//   that hit every box on the way to it (canopy.bvh:traverse), and any-hit traversal is depth
+//   first with children in slot order; so each lane meets the leaves it would meet alone, in the
+//   same order, and the same first accepted hit (also in BVHs built with spatial splits).
+// - Intersectors: hooks and filters see packets (prepared_ray<simd::float8>), so every test of
+//   every active lane goes through them. For any_hit, a filter or triangle hook sees, lane by
+//   lane, the candidates (hit lanes) it would see for the single ray, in the same order: hit
+//   counts summed over lanes equal the single-ray counts. Call counts are per packet, not per ray,
+//   and for closest_hit the candidates a lane meets depend on the order in which the packet
+//   visits leaves (near to far for the packet, not for each lane): only the result is the same.
+// - An intersector that cannot take packets (hooks or a filter declared for canopy::ray or
+//   basic_hit_record<float> only, or a template hook whose declared return type is
+//   basic_hit_record<float>) makes the batch trace every ray on its own, decided at compile time;
+//   so do structures whose boxes are not float. A template hook with a deduced return type
+//   (`auto`) is taken to serve packets: its body must compile for them (lane by lane: hr.hit[k],
+//   hr.hit.set(k, ...)), as for the packet single-ray queries.
+// Each query returns batch_stats: how many packets and single rays it traced.
+module;
+// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
+// every path (scalar, SIMD, packet) rounds the same way.
+#pragma STDC FP_CONTRACT OFF
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <stdexcept>
+#include <type_traits>
+#include <utility>
+export module canopy.query:batch;
+import canopy.bvh;
+import :single;
+
+export namespace canopy {
+
+// What a batch query traced: packets of 8 rays, and rays one at a time.
+struct batch_stats {
+    std::size_t packets = 0;
+    std::size_t single_rays = 0;
+};
+
+// The largest origin spread of a packet, as a fraction of the largest side of the scene's bounds.
+inline constexpr float batch_origin_spread = 1.0f / 64.0f;
+
+namespace detail {
+
+inline constexpr std::size_t batch_width = 8;
+using batch_packet = basic_ray<simd::float8>;
+
+// Whether packets of I over a range of Elem make the same calls as single rays would: the packet
+// query compiles without mistakes, every hook and filter the single rays would call has a packet
+// overload, and the structure's boxes are float.
+template <typename I, typename Elem>
+constexpr bool batch_takes_packets() {
+    using Leaf = leaf_primitive_t<Elem>;
+    if constexpr (acceleration_structure<Leaf> || !requires(Elem const& e) { get_bounds(e); }) {
+        return false;
+    } else if constexpr (!std::is_same_v<typename decltype(get_bounds(std::declval<Elem const&>()))::value_type,
+                                         float>) {
+        return false;
+    } else {
+        constexpr bool nested = acceleration_structure<Elem>;
+        using R1 = std::conditional_t<nested, prepared_ray<float>, ray>;
+        using R8 = std::conditional_t<nested, prepared_ray<simd::float8>, batch_packet>;
+        return intersector_mistake_v<I, batch_packet, Elem> == intersector_mistake::none &&
+               (!primitive_hook_for<I, R1, Leaf> || primitive_hook_for<I, R8, Leaf>) &&
+               (!box_hook_for<I, R1, aabb, vec3<float>> || box_hook_for<I, R8, aabb, vec3<simd::float8>>) &&
+               (!filter_hook_for<I, R1> || filter_hook_for<I, R8>);
+    }
+}
+
+// batch_origin_spread times the largest side of the bounds of [first, last); 0 when they are
+// empty or not finite (then only rays from one origin form packets).
+template <typename It>
+float batch_spread_limit(It first, It last) {
+    aabb box;
+    for (; first != last; ++first) box = extend(box, get_bounds(*first));
+    auto const d = diagonal(box);
+    float const side = std::max({d.x, d.y, d.z});
+    return std::isfinite(side) && side > 0.0f ? side * batch_origin_spread : 0.0f;
+}
+
+// The coherence test of one group of 8 rays (see the top of this file).
+inline bool coherent_group(std::span<ray const> group, float spread_limit) {
+    int active = 0;
+    unsigned signs = 0;
+    vec3<float> lo, hi;
+    for (auto const& r : group) {
+        if (!active_lanes(r)) continue;
+        unsigned const s = unsigned(std::signbit(r.direction.x)) | unsigned(std::signbit(r.direction.y)) << 1 |
+                           unsigned(std::signbit(r.direction.z)) << 2;
+        if (active == 0) {
+            signs = s;
+            lo = hi = r.origin;
+        } else {
+            if (s != signs) return false;
+            lo = min(lo, r.origin);
+            hi = max(hi, r.origin);
+        }
+        ++active;
+    }
+    if (active < 2) return false;
+    auto const spread = hi - lo;
+    return spread.x <= spread_limit && spread.y <= spread_limit && spread.z <= spread_limit;
+}
+
+inline batch_packet pack_group(std::span<ray const> group) {
+    batch_packet p;
+    for (int k = 0; k < int(batch_width); ++k) {
+        auto const& r = group[std::size_t(k)];
+        set_lane(p.origin, k, r.origin);
+        set_lane(p.direction, k, r.direction);
+        p.tmin.set(k, r.tmin);
+        p.tmax.set(k, r.tmax);
+    }
+    return p;
+}
+
+inline basic_hit_record<float> lane_record(basic_hit_record<simd::float8> const& p, int k) {
+    basic_hit_record<float> r;
+    r.hit = p.hit[k];
+    r.t = p.t[k];
+    r.u = p.u[k];
+    r.v = p.v[k];
+    r.prim_id = std::uint32_t(p.prim_id[k]);
+    r.geom_id = std::uint32_t(p.geom_id[k]);
+    r.inst_id = std::uint32_t(p.inst_id[k]);
+    for (std::size_t d = 0; d < r.inner_inst_id.size(); ++d) r.inner_inst_id[d] = std::uint32_t(p.inner_inst_id[d][k]);
+    return r;
+}
+
+inline void check_batch_sizes(std::size_t rays, std::size_t results) {
+    if (results < rays) throw std::invalid_argument("canopy: a batch query needs one result per ray");
+}
+
+// The batch loop: groups of 8 coherent rays go to packet(index, packet ray), every other ray to
+// single(index). packet is generic, so that it is only instantiated where packets are traced.
+template <typename I, typename It, typename Packet, typename Single>
+batch_stats run_batch(std::span<ray const> rays, It first, It last, Packet&& packet, Single&& single) {
+    using Elem = std::remove_cvref_t<decltype(*first)>;
+    batch_stats stats;
+    auto const one = [&](std::size_t k) {
+        single(k);
+        ++stats.single_rays;
+    };
+    std::size_t i = 0;
+    if constexpr (batch_takes_packets<I, Elem>()) {
+        if (rays.size() >= batch_width) {
+            float const limit = batch_spread_limit(first, last);
+            for (; i + batch_width <= rays.size(); i += batch_width) {
+                auto const group = rays.subspan(i, batch_width);
+                if (coherent_group(group, limit)) {
+                    packet(i, pack_group(group));
+                    ++stats.packets;
+                } else {
+                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
+                }
+            }
+        }
+    }
+    for (; i < rays.size(); ++i) one(i);
+    return stats;
+}
+
+} // namespace detail
+
+// Closest hit of every ray: out[i] is what closest_hit(rays[i], first, last, isect) returns.
+template <typename It, typename I = default_intersector>
+batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<basic_hit_record<float>> out,
+                        I&& isect = I{}) {
+    detail::check_batch_sizes(rays.size(), out.size());
+    return detail::run_batch<std::remove_reference_t<I>>(
+        rays, first, last,
+        [&](std::size_t i, auto const& p) {
+            auto const hr = closest_hit(p, first, last, isect);
+            for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = detail::lane_record(hr, k);
+        },
+        [&](std::size_t i) { out[i] = closest_hit(rays[i], first, last, isect); });
+}
+
+// Any hit of every ray: out[i] is what any_hit(rays[i], first, last, isect) returns.
+template <typename It, typename I = default_intersector>
+batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basic_hit_record<float>> out,
+                    I&& isect = I{}) {
+    detail::check_batch_sizes(rays.size(), out.size());
+    return detail::run_batch<std::remove_reference_t<I>>(
+        rays, first, last,
+        [&](std::size_t i, auto const& p) {
+            auto const hr = any_hit(p, first, last, isect);
+            for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = detail::lane_record(hr, k);
+        },
+        [&](std::size_t i) { out[i] = any_hit(rays[i], first, last, isect); });
+}
+
+// Occlusion of every ray: out[i] is any_hit(rays[i], first, last, isect).hit.
+template <typename It, typename I = default_intersector>
+batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<bool> out, I&& isect = I{}) {
+    detail::check_batch_sizes(rays.size(), out.size());
+    return detail::run_batch<std::remove_reference_t<I>>(
+        rays, first, last,
+        [&](std::size_t i, auto const& p) {
+            auto const hr = any_hit(p, first, last, isect);
+            for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = hr.hit[k];
+        },
+        [&](std::size_t i) { out[i] = any_hit(rays[i], first, last, isect).hit; });
+}
+
+// Up to N hits of every ray: out[i] is what multi_hit<N>(rays[i], first, last, isect) returns.
+// Traced one ray at a time.
+template <std::size_t N, typename It, typename I = default_intersector>
+batch_stats multi_hit(std::span<ray const> rays, It first, It last, std::span<std::array<basic_hit_record<float>, N>> out,
+                      I&& isect = I{}) {
+    detail::check_batch_sizes(rays.size(), out.size());
+    for (std::size_t i = 0; i < rays.size(); ++i) out[i] = multi_hit<N>(rays[i], first, last, isect);
+    return {0, rays.size()};
+}
+
+} // namespace canopy

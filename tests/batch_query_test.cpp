@@ -1,0 +1,348 @@
+// Tests of canopy.query:batch: closest_hit, any_hit and multi_hit<4> over spans of rays, through
+// a mesh BVH, a BVH of instances (rotated, scaled) and a two-level nesting, with and without
+// intersectors. The reference is the single-ray query of each ray; every field of every result is
+// compared bit for bit.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <random>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+import canopy.query;
+
+#include "random_support.hpp"
+#include "nested_scene.hpp"
+
+namespace {
+
+using canopy::ray;
+using canopy::triangle;
+using canopy::vec3;
+using record = canopy::basic_hit_record<float>;
+using test_support::checkerboard_opaque;
+using test_support::make_ray;
+using test_support::mesh_bvh;
+using test_support::nested_scene;
+using test_support::random_rays;
+using test_support::random_source;
+using test_support::triangle_soup;
+
+constexpr float quiet_nan = std::numeric_limits<float>::quiet_NaN();
+constexpr float inf = std::numeric_limits<float>::infinity();
+
+bool identical(record const& a, record const& b) {
+    return a.hit == b.hit && std::bit_cast<std::uint32_t>(a.t) == std::bit_cast<std::uint32_t>(b.t) &&
+           std::bit_cast<std::uint32_t>(a.u) == std::bit_cast<std::uint32_t>(b.u) &&
+           std::bit_cast<std::uint32_t>(a.v) == std::bit_cast<std::uint32_t>(b.v) && a.prim_id == b.prim_id &&
+           a.geom_id == b.geom_id && a.inst_id == b.inst_id && a.inner_inst_id == b.inner_inst_id;
+}
+
+// A pinhole camera outside the box looking at its centre: w × h rays, row by row.
+std::vector<ray> camera_rays(canopy::aabb const& box, int w, int h) {
+    auto const c = canopy::center(box);
+    float const extent = canopy::length(canopy::diagonal(box));
+    vec3<float> const eye = c + vec3<float>(0.3f, 0.4f, 1.0f) * extent;
+    vec3<float> const forward = canopy::normalize(c - eye);
+    vec3<float> const right = canopy::normalize(canopy::cross(forward, vec3<float>(0, 1, 0)));
+    vec3<float> const up = canopy::cross(right, forward);
+    std::vector<ray> rays;
+    for (int j = 0; j < h; ++j)
+        for (int i = 0; i < w; ++i) {
+            float const x = (float(i) + 0.5f) / float(w) - 0.5f, y = (float(j) + 0.5f) / float(h) - 0.5f;
+            rays.push_back(make_ray(eye, forward + right * (0.9f * x) + up * (0.9f * y)));
+        }
+    return rays;
+}
+
+// Shadow-like rays: from points close together (a few per group of 8) towards one light.
+std::vector<ray> shadow_rays(random_source& rng, canopy::aabb const& box, int count) {
+    auto const c = canopy::center(box);
+    float const extent = canopy::length(canopy::diagonal(box));
+    vec3<float> const light = c + vec3<float>(-0.5f, 1.0f, 0.5f) * extent;
+    std::vector<ray> rays;
+    vec3<float> base = rng.point_in(box);
+    for (int k = 0; k < count; ++k) {
+        if (k % 8 == 0) base = rng.point_in(box);
+        vec3<float> const p = base + rng.point(-1e-3f, 1e-3f) * extent;
+        rays.push_back({p, 1e-4f, light - p, 1.0f});
+    }
+    return rays;
+}
+
+// Invalid rays in some groups: NaN tmin, NaN or infinite origin or direction, tmin > tmax.
+void spoil(std::vector<ray>& rays) {
+    for (std::size_t i = 0; i < rays.size(); i += 37) {
+        switch (i % 5) {
+        case 0: rays[i].tmin = quiet_nan; break;
+        case 1: rays[i].origin.y = quiet_nan; break;
+        case 2: rays[i].direction.z = inf; break;
+        case 3: rays[i].tmax = -1.0f; break;
+        default: rays[i].direction.x = quiet_nan; break;
+        }
+    }
+}
+
+// The checkerboard alpha rule as a filter, for scalar rays and packets.
+struct alpha_filter : canopy::basic_intersector<alpha_filter> {
+    template <typename Ray, typename T>
+    canopy::simd::mask_type_t<T> filter(Ray const&, canopy::basic_hit_record<T> const& hr) const {
+        if constexpr (canopy::simd::simd_width_v<T> == 1) {
+            return checkerboard_opaque(hr.u, hr.v);
+        } else {
+            canopy::simd::mask_type_t<T> keep;
+            for (int k = 0; k < canopy::simd::simd_width_v<T>; ++k) keep.set(k, checkerboard_opaque(hr.u[k], hr.v[k]));
+            return keep;
+        }
+    }
+};
+
+// The same rule in a triangle hook, which also counts its calls and the candidates (hit lanes)
+// the library's test gives it.
+struct alpha_hook : canopy::basic_intersector<alpha_hook> {
+    using canopy::basic_intersector<alpha_hook>::operator();
+    std::uint64_t calls = 0, candidates = 0;
+    template <typename Ray>
+    auto operator()(Ray const& r, triangle const& tri) {
+        ++calls;
+        auto hr = intersect(r, tri);
+        using T = canopy::ray_value_t<Ray>;
+        if constexpr (canopy::simd::simd_width_v<T> == 1) {
+            candidates += hr.hit;
+            hr.hit = hr.hit && checkerboard_opaque(hr.u, hr.v);
+        } else {
+            candidates += unsigned(std::popcount(canopy::simd::movemask(hr.hit)));
+            for (int k = 0; k < canopy::simd::simd_width_v<T>; ++k)
+                if (hr.hit[k] && !checkerboard_opaque(hr.u[k], hr.v[k])) hr.hit.set(k, false);
+        }
+        return hr;
+    }
+};
+
+// Hooks for scalar rays only: the batch traces every ray on its own.
+struct scalar_only_hook : canopy::basic_intersector<scalar_only_hook> {
+    using canopy::basic_intersector<scalar_only_hook>::operator();
+    std::uint64_t calls = 0;
+    record operator()(ray const& r, triangle const& tri) {
+        ++calls;
+        return intersect(r, tri);
+    }
+};
+struct scalar_template_hook : canopy::basic_intersector<scalar_template_hook> {
+    using canopy::basic_intersector<scalar_template_hook>::operator();
+    template <typename Ray>
+    record operator()(Ray const& r, triangle const& tri) {
+        auto hr = intersect(r, tri);
+        hr.hit = hr.hit && checkerboard_opaque(hr.u, hr.v);
+        return hr;
+    }
+};
+struct scalar_only_filter : canopy::basic_intersector<scalar_only_filter> {
+    template <typename Ray>
+    bool filter(Ray const&, record const& hr) const {
+        return checkerboard_opaque(hr.u, hr.v);
+    }
+};
+
+struct tally {
+    std::size_t packets = 0, single_rays = 0, hits = 0, mismatches = 0;
+    void add(canopy::batch_stats s) {
+        packets += s.packets;
+        single_rays += s.single_rays;
+    }
+};
+
+// Every batch query of `rays` against the single-ray queries, with intersector `isect` (one
+// fresh copy per query kind and path).
+template <typename It, typename I>
+void compare(std::vector<ray> const& rays, It first, It last, I const& isect, tally& t) {
+    std::vector<record> out(rays.size());
+    auto a = isect, b = isect;
+    t.add(canopy::closest_hit(rays, first, last, out, a));
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        auto const s = canopy::closest_hit(rays[i], first, last, b);
+        t.hits += s.hit;
+        t.mismatches += !identical(out[i], s);
+    }
+    std::vector<record> any(rays.size());
+    a = isect;
+    b = isect;
+    t.add(canopy::any_hit(rays, first, last, any, a));
+    std::unique_ptr<bool[]> occluded(new bool[rays.size() + 1]);
+    auto c = isect;
+    canopy::any_hit(rays, first, last, std::span<bool>(occluded.get(), rays.size()), c);
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        auto const s = canopy::any_hit(rays[i], first, last, b);
+        t.mismatches += !identical(any[i], s);
+        t.mismatches += occluded[i] != s.hit;
+    }
+    std::vector<std::array<record, 4>> multi(rays.size());
+    a = isect;
+    t.add(canopy::multi_hit<4>(rays, first, last, std::span<std::array<record, 4>>(multi), a));
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        auto const s = canopy::multi_hit<4>(rays[i], first, last, b);
+        for (std::size_t k = 0; k < 4; ++k) t.mismatches += !identical(multi[i][k], s[k]);
+    }
+}
+
+struct scenes {
+    std::vector<triangle> soup;
+    mesh_bvh mesh;
+    nested_scene nested{1401};
+    explicit scenes(random_source& rng) : soup(triangle_soup(rng, 3000, 8.0f, 1.0f)), mesh(canopy::build_binned_sah(soup)) {}
+};
+
+template <typename I>
+void compare_everywhere(I const& isect, tally& coherent, tally& incoherent) {
+    random_source rng(1402);
+    scenes const s(rng);
+    auto run = [&](canopy::aabb const& box, auto first, auto last) {
+        auto cam = camera_rays(box, 40, 25);
+        spoil(cam);
+        compare(cam, first, last, isect, coherent);
+        compare(shadow_rays(rng, box, 400), first, last, isect, coherent);
+        compare(random_rays(rng, box, 600), first, last, isect, incoherent);
+    };
+    run(s.mesh.bounds(), &s.mesh, &s.mesh + 1);
+    run(s.nested.middle.bounds(), &s.nested.middle, &s.nested.middle + 1);
+    run(s.nested.top.bounds(), &s.nested.top, &s.nested.top + 1);
+    // A range of instances (no top-level BVH).
+    run(s.nested.middle.bounds(), s.nested.level1.begin(), s.nested.level1.end());
+}
+
+} // namespace
+
+TEST_CASE("batch queries equal the single-ray queries bit for bit, without an intersector") {
+    tally coherent, incoherent;
+    compare_everywhere(canopy::default_intersector{}, coherent, incoherent);
+    CHECK(coherent.mismatches == 0);
+    CHECK(incoherent.mismatches == 0);
+    CHECK(coherent.hits > 1000);
+    CHECK(incoherent.hits > 500);
+    // Camera and shadow rays form packets; random rays almost never share an octant.
+    CHECK(coherent.packets * 8 > coherent.single_rays);
+    CHECK(incoherent.packets * 50 < incoherent.single_rays);
+}
+
+TEST_CASE("batch queries equal the single-ray queries with an alpha filter and an alpha triangle hook") {
+    tally coherent, incoherent;
+    compare_everywhere(alpha_filter{}, coherent, incoherent);
+    CHECK(coherent.mismatches == 0);
+    CHECK(incoherent.mismatches == 0);
+    CHECK(coherent.packets > 100);
+    tally coherent_hook, incoherent_hook;
+    compare_everywhere(alpha_hook{}, coherent_hook, incoherent_hook);
+    CHECK(coherent_hook.mismatches == 0);
+    CHECK(incoherent_hook.mismatches == 0);
+    CHECK(coherent_hook.packets == coherent.packets);
+}
+
+TEST_CASE("intersectors with hooks or filters for scalar rays only make the batch trace single rays") {
+    tally coherent, incoherent;
+    compare_everywhere(scalar_only_hook{}, coherent, incoherent);
+    CHECK(coherent.mismatches == 0);
+    CHECK(coherent.packets == 0);
+    tally coherent_filter, incoherent_filter;
+    compare_everywhere(scalar_only_filter{}, coherent_filter, incoherent_filter);
+    CHECK(coherent_filter.mismatches == 0);
+    CHECK(coherent_filter.packets == 0);
+    tally coherent_template, incoherent_template;
+    compare_everywhere(scalar_template_hook{}, coherent_template, incoherent_template);
+    CHECK(coherent_template.mismatches == 0);
+    CHECK(coherent_template.packets == 0);
+    // The hook is called once per triangle test of each ray, as in the single-ray queries.
+    random_source rng(1403);
+    scenes const s(rng);
+    auto const rays = camera_rays(s.mesh.bounds(), 16, 16);
+    std::vector<record> out(rays.size());
+    scalar_only_hook batch, single;
+    canopy::closest_hit(rays, &s.mesh, &s.mesh + 1, out, batch);
+    for (auto const& r : rays) canopy::closest_hit(r, &s.mesh, &s.mesh + 1, single);
+    CHECK(batch.calls == single.calls);
+    CHECK(batch.calls > rays.size());
+}
+
+TEST_CASE("batch any_hit gives a triangle hook the candidates of the single rays, lane by lane") {
+    random_source rng(1404);
+    scenes const s(rng);
+    auto check = [&](auto first, auto last, canopy::aabb const& box) {
+        auto rays = camera_rays(box, 32, 32);
+        spoil(rays);
+        std::vector<record> out(rays.size());
+        alpha_hook batch, single;
+        auto const stats = canopy::any_hit(rays, first, last, out, batch);
+        for (auto const& r : rays) canopy::any_hit(r, first, last, single);
+        CHECK(stats.packets > 50);
+        CHECK(batch.candidates == single.candidates);
+        CHECK(single.candidates > 50);
+        // Calls are per packet: fewer than one per ray and triangle.
+        CHECK(batch.calls < single.calls);
+    };
+    check(&s.mesh, &s.mesh + 1, s.mesh.bounds());
+    check(&s.nested.top, &s.nested.top + 1, s.nested.top.bounds());
+}
+
+TEST_CASE("batches of 0, 1, 7, 9 and 1000 rays, and the decision per group of 8") {
+    random_source rng(1405);
+    scenes const s(rng);
+    auto const all = camera_rays(s.mesh.bounds(), 40, 25);
+    for (std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(7), std::size_t(9), std::size_t(1000)}) {
+        std::vector<ray> const rays(all.begin(), all.begin() + std::ptrdiff_t(n));
+        tally t;
+        compare(rays, &s.mesh, &s.mesh + 1, canopy::default_intersector{}, t);
+        CHECK(t.mismatches == 0);
+        std::vector<record> out(n);
+        auto const stats = canopy::closest_hit(rays, &s.mesh, &s.mesh + 1, out);
+        CHECK(stats.packets * 8 + stats.single_rays == n);
+        CHECK(stats.single_rays >= n % 8);
+    }
+    // One group of 8 from one origin: a packet while the directions share an octant.
+    std::vector<ray> group(8, make_ray({0, 0, -20}, {0.1f, 0.2f, 1.0f}));
+    for (std::size_t k = 0; k < 8; ++k) group[k].direction.x += 0.01f * float(k);
+    std::vector<record> out(8);
+    CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 1);
+    group[3].direction.y = -0.2f; // another octant
+    CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 0);
+    group[3].direction.y = 0.2f;
+    group[5].origin.x += 1.0f; // origins 1 apart in a box of side ~18: beyond 1/64 of it
+    CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 0);
+    group[5].origin.x -= 1.0f;
+    for (std::size_t k = 1; k < 8; ++k) group[k].tmin = quiet_nan; // one ray takes part: traced alone
+    CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 0);
+    group[1].tmin = 0.0f; // two: a packet, the other lanes inactive
+    CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 1);
+    for (std::size_t k = 0; k < 8; ++k) CHECK(identical(out[k], canopy::closest_hit(group[k], &s.mesh, &s.mesh + 1)));
+    // Fewer results than rays: an error, nothing traced.
+    std::vector<record> short_out(7);
+    CHECK_THROWS_AS(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, short_out), std::invalid_argument);
+}
+
+TEST_CASE("with spatial splits, batch queries are bit-identical too, any hit included") {
+    // build_quality::high: one needle may sit in several leaves, each box bounding only its part.
+    // A packet tests a leaf only for the lanes that reached it: a lane never meets a needle in a
+    // leaf it would not visit alone, so its first any-hit candidate is the single ray's.
+    random_source rng(1406);
+    auto const soup = test_support::needle_soup(rng, 3000, 8.0f, 0.05f);
+    mesh_bvh const b = canopy::build_binned_sah(soup, {.quality = canopy::build_quality::high, .split_budget = 3.0f});
+    auto rays = camera_rays(b.bounds(), 64, 48);
+    spoil(rays);
+    tally t;
+    compare(rays, &b, &b + 1, canopy::default_intersector{}, t);
+    compare(rays, &b, &b + 1, alpha_filter{}, t);
+    CHECK(t.packets > 400);
+    CHECK(t.hits > 1000);
+    CHECK(t.mismatches == 0);
+    alpha_hook batch, single;
+    std::vector<record> out(rays.size());
+    canopy::any_hit(rays, &b, &b + 1, out, batch);
+    for (auto const& r : rays) canopy::any_hit(r, &b, &b + 1, single);
+    CHECK(batch.candidates == single.candidates);
+}
