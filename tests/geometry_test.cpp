@@ -621,21 +621,32 @@ bool exact_slab_hit(ray const& r, vec3<float> inv_dir, canopy::aabb const& box, 
     return tnear <= tfar;
 }
 
+// Case i of the grazing-ray batteries: a box on the 2^-10 grid (moved by `shift` on every axis)
+// and a ray from a grid point aimed at one of its corners or edge points, slightly jittered.
+struct grazing {
+    canopy::aabb box;
+    ray r;
+};
+
+grazing grazing_case(random_source& rng, int i, float shift) {
+    vec3<float> const lo = rng.dyadic_point({-4, -4, -4}, {0, 0, 0}, 10) + vec3<float>(shift);
+    canopy::aabb const box{lo, lo + rng.dyadic_point({0.25f, 0.25f, 0.25f}, {4, 4, 4}, 10)};
+    vec3<float> target((i & 1) ? box.min.x : box.max.x, (i & 2) ? box.min.y : box.max.y, (i & 4) ? box.min.z : box.max.z);
+    target[i % 3] = rng.dyadic(box.min[i % 3], box.max[i % 3], 10);
+    target = target + rng.dyadic_point({-0.001f, -0.001f, -0.001f}, {0.001f, 0.001f, 0.001f}, 10);
+    vec3<float> const origin = rng.dyadic_point({-12, -12, -12}, {12, 12, 12}, 10) + vec3<float>(shift);
+    ray r = make_ray(origin, target - origin, 0, inf);
+    if (i % 7 == 0) r.tmax = rng.dyadic(0, 2, 10);
+    return {box, r};
+}
+
 } // namespace
 
 TEST_CASE("ray/box slab test is conservative: it never misses a box the exact slab test hits") {
     random_source rng(16);
     int exact_hits = 0, clear_misses = 0;
     for (int i = 0; i < 50000; ++i) {
-        vec3<float> const lo = rng.dyadic_point({-4, -4, -4}, {0, 0, 0}, 10);
-        canopy::aabb const box{lo, lo + rng.dyadic_point({0.25f, 0.25f, 0.25f}, {4, 4, 4}, 10)};
-        // Aim at a corner or an edge point, slightly jittered: grazing rays.
-        vec3<float> target((i & 1) ? box.min.x : box.max.x, (i & 2) ? box.min.y : box.max.y, (i & 4) ? box.min.z : box.max.z);
-        target[i % 3] = rng.dyadic(box.min[i % 3], box.max[i % 3], 10);
-        target = target + rng.dyadic_point({-0.001f, -0.001f, -0.001f}, {0.001f, 0.001f, 0.001f}, 10);
-        vec3<float> const origin = rng.dyadic_point({-12, -12, -12}, {12, 12, 12}, 10);
-        ray r = make_ray(origin, target - origin, 0, inf);
-        if (i % 7 == 0) r.tmax = rng.dyadic(0, 2, 10);
+        auto const [box, r] = grazing_case(rng, i, 0.0f);
         vec3<float> const inv_dir(1.0f / r.direction.x, 1.0f / r.direction.y, 1.0f / r.direction.z);
         long double gap = 0;
         bool const exact = exact_slab_hit(r, inv_dir, box, gap);
@@ -661,14 +672,7 @@ TEST_CASE("the traversal's box test (widened origins, fused where it applies) ne
     int exact_hits = 0, clear_misses = 0, fused = 0, nonzero = 0;
     for (int i = 0; i < 60000; ++i) {
         float const shift = (i % 3 == 0) ? 0.0f : (i % 3 == 1 ? 1000.0f : -65536.0f);
-        vec3<float> const lo = rng.dyadic_point({-4, -4, -4}, {0, 0, 0}, 10) + vec3<float>(shift);
-        canopy::aabb const box{lo, lo + rng.dyadic_point({0.25f, 0.25f, 0.25f}, {4, 4, 4}, 10)};
-        vec3<float> target((i & 1) ? box.min.x : box.max.x, (i & 2) ? box.min.y : box.max.y, (i & 4) ? box.min.z : box.max.z);
-        target[i % 3] = rng.dyadic(box.min[i % 3], box.max[i % 3], 10);
-        target = target + rng.dyadic_point({-0.001f, -0.001f, -0.001f}, {0.001f, 0.001f, 0.001f}, 10);
-        vec3<float> const origin = rng.dyadic_point({-12, -12, -12}, {12, 12, 12}, 10) + vec3<float>(shift);
-        ray r = make_ray(origin, target - origin, 0, inf);
-        if (i % 7 == 0) r.tmax = rng.dyadic(0, 2, 10);
+        auto const [box, r] = grazing_case(rng, i, shift);
         canopy::prepared_ray<float> prepared(r, false);
         prepared.widen_box_tests_for(box);
         bool const no_zero = r.direction.x != 0.0f && r.direction.y != 0.0f && r.direction.z != 0.0f;
