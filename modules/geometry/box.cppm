@@ -159,17 +159,59 @@ template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 void box_margin_origins(basic_ray<T> const& ray, vec3<T> const& inv_dir, basic_aabb<S> const& bounds,
                         vec3<T>& near_origin, vec3<T>& far_origin) {
-    T reach(S(0));
-    for (int axis = 0; axis < 3; ++axis) {
-        reach = simd::max(reach, simd::abs(T(bounds.min[axis]) - ray.origin[axis]));
-        reach = simd::max(reach, simd::abs(T(bounds.max[axis]) - ray.origin[axis]));
-    }
+    // R in simd::reduce_max's order over the lanes (x, y, z, 0) of a 4-lane vector, so that
+    // box_test_constants' vector form below gives the same bits, NaN included.
+    vec3<T> m;
+    for (int axis = 0; axis < 3; ++axis)
+        m[axis] = simd::max(simd::abs(T(bounds.min[axis]) - ray.origin[axis]),
+                            simd::abs(T(bounds.max[axis]) - ray.origin[axis]));
+    T const reach = simd::max(simd::max(m.x, m.z), simd::max(m.y, T(S(0))));
     T const delta = reach * T(S(1.0 / 524288.0)); // 2 · 2^-20 · R: rounding the move keeps ≥ half
     for (int axis = 0; axis < 3; ++axis) {
         T const move = simd::max(delta, simd::abs(ray.origin[axis]) * T(S(1.0 / 2097152.0)));
         T const towards_near = simd::select(inv_dir[axis] < T(0), -move, move);
         near_origin[axis] = ray.origin[axis] + towards_near;
         far_origin[axis] = ray.origin[axis] - towards_near;
+    }
+}
+
+// Both per-ray constants of traversal's box test: the widened origins (box_margin_origins) and the
+// fused test's offsets (fused_slab_offsets).
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+[[gnu::always_inline]] inline void box_test_constants(basic_ray<T> const& ray, vec3<T> const& inv_dir,
+                                                      basic_aabb<S> const& bounds, vec3<T>& near_origin,
+                                                      vec3<T>& far_origin, slab_offsets<T>& slabs) {
+    if constexpr (std::is_same_v<T, float> && simd::native_width<4>) {
+        // One scalar ray: its three axes in the lanes of one vector (lane 3 holds zeros), the same
+        // operations lane by lane as the two functions, so the same bits in a third of the
+        // instructions. Paid once per ray and per instance entered.
+        using simd::float4;
+        auto const lanes = [](vec3<float> const& v) {
+            alignas(16) float const l[4] = {v.x, v.y, v.z, 0.0f};
+            return float4::load_aligned(l);
+        };
+        float4 const o = lanes(ray.origin), inv = lanes(inv_dir);
+        float4 const m = simd::max(simd::abs(lanes(bounds.min) - o), simd::abs(lanes(bounds.max) - o));
+        float4 const delta(simd::reduce_max(m) * float(1.0 / 524288.0));
+        float4 const move = simd::max(delta, simd::abs(o) * float4(float(1.0 / 2097152.0)));
+        float4 const towards_near = simd::select(inv < float4(0.0f), -move, move);
+        float4 const near = o + towards_near, far = o - towards_near;
+        float4 const near_offset = near * inv, far_offset = far * inv;
+        float4 const finite = (inv - inv) + (near_offset - near_offset) + (far_offset - far_offset);
+        alignas(16) float out[4][4];
+        near.store_aligned(out[0]);
+        far.store_aligned(out[1]);
+        near_offset.store_aligned(out[2]);
+        far_offset.store_aligned(out[3]);
+        near_origin = {out[0][0], out[0][1], out[0][2]};
+        far_origin = {out[1][0], out[1][1], out[1][2]};
+        slabs.near_offset = {out[2][0], out[2][1], out[2][2]};
+        slabs.far_offset = {out[3][0], out[3][1], out[3][2]};
+        slabs.usable = (simd::movemask(finite == float4(0.0f)) & 7u) == 7u;
+    } else {
+        box_margin_origins(ray, inv_dir, bounds, near_origin, far_origin);
+        slabs = fused_slab_offsets(inv_dir, near_origin, far_origin);
     }
 }
 

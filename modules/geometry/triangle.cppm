@@ -137,8 +137,7 @@ struct prepared_ray : basic_ray<T> {
     // traversed with the same ray).
     template <typename S>
     [[gnu::always_inline]] inline void widen_box_tests_for(basic_aabb<S> const& bounds) {
-        box_margin_origins(static_cast<basic_ray<T> const&>(*this), inv_dir, bounds, near_origin, far_origin);
-        slabs = fused_slab_offsets(inv_dir, near_origin, far_origin);
+        box_test_constants(static_cast<basic_ray<T> const&>(*this), inv_dir, bounds, near_origin, far_origin, slabs);
     }
 
     // Out of line: called once per ray from inside traversal loops, where inlining it would only
