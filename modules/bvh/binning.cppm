@@ -5,7 +5,9 @@ module;
 // every path (scalar, SIMD, packet) rounds the same way.
 #pragma STDC FP_CONTRACT OFF
 #include <array>
+#include <bit>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <vector>
 export module canopy.bvh:binning;
@@ -28,12 +30,23 @@ int bin_index(S x, S lo, S scale, int bins) {
     return int(f);
 }
 
-// Per-task working memory of the binning: 3 · bins bins and one sweep array.
+// A bin as the 4-lane binning of canopy.bvh:build fills it: its box in two vectors (lane 3
+// ignored) and its count.
+struct alignas(32) vector_bin {
+    simd::float4 lo, hi;
+};
+
+// Per-task working memory of the binning: 3 · bins bins, one sweep array, and the 4-lane bins
+// with their counts.
 template <typename S>
 struct bin_scratch {
-    explicit bin_scratch(int bins) : bins(3 * std::size_t(bins)), right_cost(std::size_t(bins)) {}
+    explicit bin_scratch(int bins)
+        : bins(3 * std::size_t(bins)), right_cost(std::size_t(bins)), vector_bins(3 * std::size_t(bins)),
+          vector_counts(3 * std::size_t(bins)) {}
     std::vector<bin<S>> bins;
     std::vector<double> right_cost;
+    std::vector<vector_bin> vector_bins;
+    std::vector<std::uint32_t> vector_counts;
 };
 
 // Bounds of a range of primitives and of their centroids.
@@ -45,7 +58,12 @@ struct range_bounds {
 
 // Tests the SAH counts for a leaf of n primitives tested block_size at a time: ceil(n / block_size)
 // (triangle BVHs test blocks of triangles at once; Embree's builders count blocks the same way).
-inline double leaf_tests(std::size_t n, std::size_t block_size) { return double((n + block_size - 1) / block_size); }
+// (A shift where block_size is a power of two, as it always is for blocks: no division per bin.)
+inline double leaf_tests(std::size_t n, std::size_t block_size) {
+    std::size_t const rounded_up = n + block_size - 1;
+    return double(std::has_single_bit(block_size) ? rounded_up >> std::countr_zero(block_size)
+                                                  : rounded_up / block_size);
+}
 
 // The cheapest split found so far: bins [0, split) of `axis` go left. cost is the sum over both
 // sides of surface area × leaf_tests (no traversal term, not divided by the parent's area).

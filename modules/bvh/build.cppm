@@ -24,6 +24,7 @@ module;
 #include <limits>
 #include <numeric>
 #include <span>
+#include <type_traits>
 #include <vector>
 export module canopy.bvh:build;
 import canopy.geometry;
@@ -38,11 +39,26 @@ export namespace canopy {
 namespace detail {
 
 
+// A primitive's box and its input index: what the builder partitions in place (Embree's PrimRef),
+// so that every pass over a node's primitives reads consecutive memory instead of gathering boxes
+// through an index array. 32 bytes for float: one box in two 4-lane loads (the index and the
+// padding ride in lane 3, which the binning ignores).
+template <typename S>
+struct prim_ref {
+    vec3<S> lo;
+    std::uint32_t index = 0;
+    vec3<S> hi;
+    std::uint32_t unused = 0;
+
+    // Twice the box's centre: the builder bins lo + hi, which splits exactly where the centre
+    // would (halving is exact), one operation fewer per primitive and per pass.
+    vec3<S> doubled_center() const { return lo + hi; }
+    basic_aabb<S> box() const { return {lo, hi}; }
+};
+
 template <typename S>
 struct build_context {
-    std::vector<basic_aabb<S>> boxes;
-    std::vector<vec3<S>> centers;
-    std::vector<std::uint32_t> order;
+    std::vector<prim_ref<S>> refs;
     std::vector<bvh_node<S>>* nodes = nullptr;
     std::atomic<std::uint32_t> node_count{1};
     std::atomic<int> depth{0};
@@ -50,19 +66,72 @@ struct build_context {
     std::size_t block_size = 1; // primitives tested together in a leaf (see leaf_tests)
 };
 
+// Bounds of refs[begin, end) and of their doubled centres.
 template <typename S>
 range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::size_t end) {
     range_bounds<S> r;
     for (std::size_t i = begin; i < end; ++i) {
-        r.bounds = extend(r.bounds, ctx.boxes[ctx.order[i]]);
-        r.centroids = extend(r.centroids, ctx.centers[ctx.order[i]]);
+        r.bounds = extend(r.bounds, ctx.refs[i].box());
+        r.centroids = extend(r.centroids, ctx.refs[i].doubled_center());
     }
     return r;
 }
 
-// Builds the subtree of order[begin, end) into nodes[node_index]; `range` holds the bounds of
-// those primitives and of their centroids (the parent computes them while partitioning, so no
-// node walks its primitives just for that).
+// Bins refs[begin, end) on the three axes into scratch.bins, as centroid_bins::add does one
+// primitive at a time. For float with 4-lane vectors, the three axes' bin indices come from one
+// vector computation and each bin's box grows by one 4-lane min and max, with the same rules
+// lane by lane (bin_index: NaN and values below the range in bin 0, values above it in the last
+// bin; extend: NaN coordinates ignored), so the bins of every usable axis hold the same boxes and
+// counts (the others, which the sweep skips, are filled too instead of tested for).
+template <typename S>
+void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::size_t begin, std::size_t end,
+              bin_scratch<S>& scratch) {
+    bin<S>* const bin_data = scratch.bins.data();
+    if constexpr (std::is_same_v<S, float> && simd::native_width<4>) {
+        using simd::float4;
+        using simd::int4;
+        std::size_t const n = 3 * std::size_t(binning.bins);
+        vector_bin* const boxes = scratch.vector_bins.data();
+        std::uint32_t* const counts = scratch.vector_counts.data();
+        float const inf = std::numeric_limits<float>::infinity();
+        for (std::size_t k = 0; k < n; ++k) {
+            boxes[k] = {float4(inf), float4(-inf)};
+            counts[k] = 0;
+        }
+        alignas(16) float const lo_lanes[4] = {binning.lo[0], binning.lo[1], binning.lo[2], 0.0f};
+        alignas(16) float const scale_lanes[4] = {binning.scale[0], binning.scale[1], binning.scale[2], 0.0f};
+        float4 const lo = float4::load_aligned(lo_lanes), scale = float4::load_aligned(scale_lanes);
+        float4 const last(float(binning.bins - 1));
+        int4 const first_of_axis = int4::iota() * int4(binning.bins);
+        for (std::size_t i = begin; i < end; ++i) {
+            float4 const box_lo = float4::load(&refs[i].lo.x), box_hi = float4::load(&refs[i].hi.x);
+            // max(f, 0) takes 0 for NaN (the second operand), as bin_index does.
+            float4 const f = simd::min(simd::max((box_lo + box_hi - lo) * scale, float4(0.0f)), last);
+            alignas(16) std::int32_t slot[4];
+            (simd::convert_to_int(f) + first_of_axis).store_aligned(slot);
+            for (int a = 0; a < 3; ++a) {
+                auto& b = boxes[std::size_t(slot[a])];
+                b.lo = simd::min(box_lo, b.lo);
+                b.hi = simd::max(box_hi, b.hi);
+                ++counts[std::size_t(slot[a])];
+            }
+        }
+        for (std::size_t k = 0; k < n; ++k) {
+            alignas(16) float l[4], h[4];
+            boxes[k].lo.store_aligned(l);
+            boxes[k].hi.store_aligned(h);
+            bin_data[k].bounds = {vec3<float>(l[0], l[1], l[2]), vec3<float>(h[0], h[1], h[2])};
+            bin_data[k].count = counts[k];
+        }
+    } else {
+        binning.clear(bin_data);
+        for (std::size_t i = begin; i < end; ++i) binning.add(bin_data, refs[i].box(), refs[i].doubled_center());
+    }
+}
+
+// Builds the subtree of refs[begin, end) into nodes[node_index]; `range` holds the bounds of
+// those primitives and of their doubled centres (the parent computes them while partitioning, so
+// no node walks its primitives just for that).
 template <typename S>
 void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t node_index, std::size_t begin,
                 std::size_t end, int depth, range_bounds<S> const& range) {
@@ -70,7 +139,6 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
     auto const& opt = ctx.options;
     std::size_t const count = end - begin;
     basic_aabb<S> const& bounds = range.bounds;
-    basic_aabb<S> const& centroid_bounds = range.centroids;
     nodes[node_index].bounds = bounds;
 
     int prev = ctx.depth.load(std::memory_order_relaxed);
@@ -85,36 +153,28 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
     // Best binned SAH split over all three axes, binned in one pass over the primitives. Small
     // nodes use one bin per primitive at most: the sweep costs O(bins) whatever the count.
     int const bins = int(std::min<std::size_t>(std::size_t(opt.bins), std::max<std::size_t>(count, 2)));
-    centroid_bins<S> const binning(centroid_bounds, bins);
-    bin<S>* const bin_data = scratch.bins.data();
-    binning.clear(bin_data);
-    {
-        // Plain pointers: the stores into the bins must not make the compiler reload the arrays.
-        std::uint32_t const* const order = ctx.order.data();
-        vec3<S> const* const centers = ctx.centers.data();
-        basic_aabb<S> const* const boxes = ctx.boxes.data();
-        for (std::size_t i = begin; i < end; ++i) {
-            std::uint32_t const p = order[i];
-            binning.add(bin_data, boxes[p], centers[p]);
-        }
-    }
+    centroid_bins<S> const binning(range.centroids, bins);
+    bin_refs(binning, ctx.refs.data(), begin, end, scratch);
+    bin<S> const* const bin_data = scratch.bins.data();
     split_choice const best = binning.best_split(bin_data, count, ctx.block_size, scratch.right_cost);
     if (leaf_is_cheaper(opt, count, ctx.block_size, double(surface_area(bounds)), best)) return make_leaf();
 
-    // Partition by the chosen bin boundary, gathering the children's centroid bounds on the way
-    // (their primitive bounds are the unions of their bins); or by index when centroids coincide.
+    // Partition in place by the chosen bin boundary, gathering the children's centroid bounds on
+    // the way (their primitive bounds are the unions of their bins); or by index when centroids
+    // coincide.
     std::size_t mid;
     range_bounds<S> left, right;
     if (best.axis >= 0) {
+        prim_ref<S>* const refs = ctx.refs.data();
         std::size_t i = begin, j = end;
         while (i < j) {
-            std::uint32_t const p = ctx.order[i];
-            if (binning.index(best.axis, ctx.centers[p][best.axis]) < best.split) {
-                left.centroids = extend(left.centroids, ctx.centers[p]);
+            vec3<S> const c = refs[i].doubled_center();
+            if (binning.index(best.axis, c[best.axis]) < best.split) {
+                left.centroids = extend(left.centroids, c);
                 ++i;
             } else {
-                right.centroids = extend(right.centroids, ctx.centers[p]);
-                std::swap(ctx.order[i], ctx.order[--j]);
+                right.centroids = extend(right.centroids, c);
+                std::swap(refs[i], refs[--j]);
             }
         }
         mid = i;
@@ -197,14 +257,11 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     detail::build_context<S> ctx;
     ctx.options = options;
     if constexpr (stores_triangle_blocks_v<Prim>) ctx.block_size = triangle_block_width;
-    ctx.boxes.resize(n);
-    ctx.centers.resize(n);
-    ctx.order.resize(n);
-    std::iota(ctx.order.begin(), ctx.order.end(), std::uint32_t(0));
+    ctx.refs.resize(n);
     parallel_for_chunks(n, 1024, [&](std::size_t first, std::size_t last) {
         for (std::size_t i = first; i < last; ++i) {
-            ctx.boxes[i] = get_bounds(prims[i]);
-            ctx.centers[i] = center(ctx.boxes[i]);
+            auto const box = get_bounds(prims[i]);
+            ctx.refs[i] = {box.min, std::uint32_t(i), box.max};
         }
     });
 
@@ -214,7 +271,10 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     detail::build_node(ctx, scratch, 0, 0, n, 0, detail::bounds_of(ctx, 0, n));
     result.nodes.resize(ctx.node_count.load());
     result.depth = ctx.depth.load();
-    detail::finish_build(result, prims, ctx.order);
+    std::vector<std::uint32_t> order(n);
+    for (std::size_t i = 0; i < n; ++i) order[i] = ctx.refs[i].index;
+    ctx.refs = {};
+    detail::finish_build(result, prims, order);
     return result;
 }
 
