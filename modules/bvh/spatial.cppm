@@ -82,8 +82,7 @@ S round_up(double x) {
 // plane. A crossing is computed in double with an error below 12 · 2^-53 of the edge's largest
 // coordinate; it is widened by 2^-48 of that, clamped to the edge's extent (where the exact
 // crossing lies; a NaN from an overflow falls back to it), then rounded outward with the rest.
-// Exact = false (the estimates of the binning): no widening, rounded to nearest.
-template <bool Exact, typename S>
+template <typename S>
 void split_box(basic_triangle<S> const& tri, int axis, S position, basic_aabb<S> const within, basic_aabb<S>& left,
                basic_aabb<S>& right) {
     constexpr double inf = std::numeric_limits<double>::infinity();
@@ -108,7 +107,7 @@ void split_box(basic_triangle<S> const& tri, int axis, S position, basic_aabb<S>
             if (c != axis) {
                 double const pc = double(p[c]), qc = double(q[c]);
                 double const x = pc + (qc - pc) * f;
-                double const margin = Exact ? std::max(std::fabs(pc), std::fabs(qc)) * 0x1p-48 : 0.0;
+                double const margin = std::max(std::fabs(pc), std::fabs(qc)) * 0x1p-48;
                 a = x - margin > std::min(pc, qc) ? x - margin : std::min(pc, qc);
                 b = x + margin < std::max(pc, qc) ? x + margin : std::max(pc, qc);
             }
@@ -122,8 +121,8 @@ void split_box(basic_triangle<S> const& tri, int axis, S position, basic_aabb<S>
         box = {};
         for (int c = 0; c < 3; ++c) {
             auto const k = std::size_t(c);
-            S const lo = std::max(Exact ? round_down<S>(low[s][k]) : S(low[s][k]), within.min[c]);
-            S const hi = std::min(Exact ? round_up<S>(high[s][k]) : S(high[s][k]), within.max[c]);
+            S const lo = std::max(round_down<S>(low[s][k]), within.min[c]);
+            S const hi = std::min(round_up<S>(high[s][k]), within.max[c]);
             if (!(lo <= hi)) {
                 box = {};
                 break;
@@ -164,13 +163,15 @@ template <typename S>
 struct spatial_scratch {
     explicit spatial_scratch(int bins)
         : object(bins), boxes(std::size_t(bins)), enter(std::size_t(bins)), exit(std::size_t(bins)),
-          planes(std::size_t(bins) + 1), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)) {}
+          planes(std::size_t(bins) + 1), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)),
+          parts(std::size_t(bins)) {}
     bin_scratch<S> object;
     std::vector<basic_aabb<S>> boxes;
     std::vector<std::size_t> enter, exit;
     std::vector<S> planes;
     std::vector<basic_aabb<S>> right_boxes;
     std::vector<std::size_t> right_counts;
+    std::vector<basic_aabb<S>> parts; // one reference's parts, bin by bin (bin_reference_parts)
 };
 
 // The best spatial split: references left of `position` go left, right of it right, those that
@@ -191,6 +192,43 @@ int plane_bin(S x, S const* planes, int bins, S scale) {
     while (k > 0 && x < planes[k]) --k;
     while (k + 1 < bins && x >= planes[k + 1]) ++k;
     return k;
+}
+
+// Adds to boxes[first..last] the parts of one reference that spans those bins along `axis`: bin k
+// gets the bounds of the triangle's part between planes k and k + 1 (its vertices there and the
+// points where its edges cross those planes), clipped to the reference's box. Each crossing point
+// is computed once, for the two bins it bounds, in S: an estimate for the sweep (the references a
+// chosen split duplicates are clipped exactly, split_box), and a tighter one than clipping
+// the reference bin after bin, which bounds each part by two half-planes' boxes.
+template <typename S>
+void bin_reference_parts(basic_triangle<S> const& tri, basic_aabb<S> const& box, int axis, S const* planes, int bins,
+                         S scale, int first, int last, basic_aabb<S>* boxes, basic_aabb<S>* parts) {
+    for (int k = first; k <= last; ++k) parts[k] = {};
+    vec3<S> const v[3] = {tri.v0, tri.v1, tri.v2};
+    for (auto const& p : v) {
+        int const k = std::clamp(plane_bin(p[axis], planes, bins, scale), first, last);
+        parts[k] = extend(parts[k], p);
+    }
+    for (int i = 0; i < 3; ++i) {
+        vec3<S> p = v[i], q = v[(i + 1) % 3];
+        if (q[axis] < p[axis]) std::swap(p, q);
+        if (!(p[axis] < q[axis])) continue; // in one plane across the axis: its vertices bound it
+        S const run = q[axis] - p[axis];
+        vec3<S> const d = q - p;
+        for (int k = std::max(first, plane_bin(p[axis], planes, bins, scale)); k < last; ++k) {
+            S const plane = planes[k + 1];
+            if (!(plane < q[axis])) break;
+            if (!(plane > p[axis])) continue;
+            vec3<S> x = p + d * ((plane - p[axis]) / run);
+            x[axis] = plane;
+            parts[k] = extend(parts[k], x);
+            parts[k + 1] = extend(parts[k + 1], x);
+        }
+    }
+    for (int k = first; k <= last; ++k) {
+        basic_aabb<S> const part = intersection(parts[k], box);
+        if (!is_empty(part)) boxes[k] = extend(boxes[k], part);
+    }
 }
 
 template <typename Prim, typename S>
@@ -218,15 +256,8 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
                 scratch.boxes[std::size_t(first)] = extend(scratch.boxes[std::size_t(first)], r.box);
                 continue;
             }
-            // Cut off one bin after the other: `rest` bounds the part right of the bins done (an
-            // estimate: the references that a split duplicates are clipped exactly).
-            auto const& tri = ctx.prims[r.prim];
-            basic_aabb<S> rest = r.box, part;
-            for (int k = first; k < last; ++k) {
-                split_box<false>(tri, axis, planes[k + 1], rest, part, rest);
-                scratch.boxes[std::size_t(k)] = extend(scratch.boxes[std::size_t(k)], part);
-            }
-            scratch.boxes[std::size_t(last)] = extend(scratch.boxes[std::size_t(last)], rest);
+            bin_reference_parts(ctx.prims[r.prim], r.box, axis, planes, bins, scale, first, last, scratch.boxes.data(),
+                                scratch.parts.data());
         }
         // From the right: the references leaving bins ≥ k; then from the left: those entering
         // bins < k. Plane k splits there.
@@ -276,7 +307,7 @@ std::size_t partition_spatial(spatial_context<Prim> const& ctx, reference_list<S
             continue;
         }
         basic_aabb<S> left_part, right_part;
-        split_box<true>(ctx.prims[r.prim], axis, position, r.box, left_part, right_part);
+        split_box(ctx.prims[r.prim], axis, position, r.box, left_part, right_part);
         if (is_empty(left_part)) {
             right.push_back({right_part, r.prim});
             continue;
