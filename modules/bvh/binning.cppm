@@ -36,17 +36,22 @@ struct alignas(32) vector_bin {
     simd::float4 lo, hi;
 };
 
-// Per-task working memory of the binning: 3 · bins bins, one sweep array, and the 4-lane bins
-// with their counts.
+// Per-task working memory of the binning: 3 · bins bins and one sweep array; for the 4-lane
+// binning of canopy.bvh:build, its bins with their counts and its sweep's transposed bins, counts
+// and right-side costs.
 template <typename S>
 struct bin_scratch {
     explicit bin_scratch(int bins)
         : bins(3 * std::size_t(bins)), right_cost(std::size_t(bins)), vector_bins(3 * std::size_t(bins)),
-          vector_counts(3 * std::size_t(bins)) {}
+          vector_counts(3 * std::size_t(bins)), sweep_boxes(6 * std::size_t(bins)), sweep_counts(std::size_t(bins)),
+          sweep_right(std::size_t(bins)) {}
     std::vector<bin<S>> bins;
     std::vector<double> right_cost;
     std::vector<vector_bin> vector_bins;
     std::vector<std::uint32_t> vector_counts;
+    std::vector<simd::float4> sweep_boxes;
+    std::vector<simd::int4> sweep_counts;
+    std::vector<simd::float4> sweep_right; // the right sides' costs, one lane per axis
 };
 
 // Bounds of a range of primitives and of their centroids.

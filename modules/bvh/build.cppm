@@ -18,6 +18,7 @@ module;
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -77,17 +78,22 @@ range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::s
     return r;
 }
 
-// Bins refs[begin, end) on the three axes into scratch.bins, as centroid_bins::add does one
-// primitive at a time. For float with 4-lane vectors, the three axes' bin indices come from one
-// vector computation and each bin's box grows by one 4-lane min and max, with the same rules
-// lane by lane (bin_index: NaN and values below the range in bin 0, values above it in the last
-// bin; extend: NaN coordinates ignored), so the bins of every usable axis hold the same boxes and
-// counts (the others, which the sweep skips, are filled too instead of tested for).
+// Whether the builder bins and sweeps with 4-lane vectors (float boxes, SSE or wider): then the
+// bins live in bin_scratch::vector_bins, else in bin_scratch::bins (centroid_bins, one primitive
+// and one axis at a time). Both give the same bins, the same split and the same tree.
+template <typename S>
+inline constexpr bool vector_binning = std::is_same_v<S, float> && simd::native_width<4>;
+
+// Bins refs[begin, end) on the three axes, as centroid_bins::add does one primitive at a time.
+// With vector_binning, the three axes' bin indices come from one vector computation and each
+// bin's box grows by one 4-lane min and max, with the same rules lane by lane (bin_index: NaN and
+// values below the range in bin 0, values above it in the last bin; extend: NaN coordinates
+// ignored), so the bins of every usable axis hold the same boxes and counts (the others, which
+// the sweep skips, are filled too instead of tested for).
 template <typename S>
 void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::size_t begin, std::size_t end,
               bin_scratch<S>& scratch) {
-    bin<S>* const bin_data = scratch.bins.data();
-    if constexpr (std::is_same_v<S, float> && simd::native_width<4>) {
+    if constexpr (vector_binning<S>) {
         using simd::float4;
         using simd::int4;
         std::size_t const n = 3 * std::size_t(binning.bins);
@@ -116,16 +122,117 @@ void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::siz
                 ++counts[std::size_t(slot[a])];
             }
         }
-        for (std::size_t k = 0; k < n; ++k) {
-            alignas(16) float l[4], h[4];
-            boxes[k].lo.store_aligned(l);
-            boxes[k].hi.store_aligned(h);
-            bin_data[k].bounds = {vec3<float>(l[0], l[1], l[2]), vec3<float>(h[0], h[1], h[2])};
-            bin_data[k].count = counts[k];
-        }
     } else {
+        bin<S>* const bin_data = scratch.bins.data();
         binning.clear(bin_data);
         for (std::size_t i = begin; i < end; ++i) binning.add(bin_data, refs[i].box(), refs[i].doubled_center());
+    }
+}
+
+// centroid_bins::best_split over the vector bins: the sweeps of the three axes run together, one
+// axis per lane, on the bins transposed (lane a of plane row c, bin k: coordinate c of the box
+// of bin k on axis a). Each lane computes the float areas of canopy.math's surface_area with the
+// same operations; the costs are formed in float (sweep_object_bins forms them in double), and
+// the first cheapest boundary of the lowest axis wins, as in sweep_object_bins' scan.
+template <typename S>
+    requires vector_binning<S>
+split_choice best_split_vector(centroid_bins<S> const& binning, bin_scratch<S>& scratch, std::size_t count,
+                               std::size_t block_size) {
+    using simd::float4;
+    using simd::int4;
+    std::size_t const bins = std::size_t(binning.bins);
+    float4* const plane = scratch.sweep_boxes.data(); // row c (min x, y, z, max x, y, z) at c * bins
+    int4* const bin_count = scratch.sweep_counts.data();
+    for (std::size_t k = 0; k < bins; ++k) {
+        alignas(16) float rows[6][4] = {};
+        alignas(16) std::int32_t n[4] = {};
+        for (std::size_t a = 0; a < 3; ++a) {
+            alignas(16) float l[4], h[4];
+            scratch.vector_bins[a * bins + k].lo.store_aligned(l);
+            scratch.vector_bins[a * bins + k].hi.store_aligned(h);
+            for (std::size_t c = 0; c < 3; ++c) {
+                rows[c][a] = l[c];
+                rows[3 + c][a] = h[c];
+            }
+            n[a] = std::int32_t(scratch.vector_counts[a * bins + k]);
+        }
+        for (std::size_t c = 0; c < 6; ++c) plane[c * bins + k] = float4::load_aligned(rows[c]);
+        bin_count[k] = int4::load_aligned(n);
+    }
+    // surface_area of each lane's box (canopy.math): 2 · (dx·dy + dy·dz + dz·dx), 0 when empty.
+    auto const area = [](std::array<float4, 6> const& box) {
+        float4 const dx = box[3] - box[0], dy = box[4] - box[1], dz = box[5] - box[2];
+        auto const empty = ((box[0] > box[3]) | (box[1] > box[4])) | (box[2] > box[5]);
+        return simd::select(empty, float4(0.0f), float4(2.0f) * (dx * dy + dy * dz + dz * dx));
+    };
+    auto const empty_box = [] {
+        float const inf = std::numeric_limits<float>::infinity();
+        return std::array<float4, 6>{float4(inf), float4(inf), float4(inf), float4(-inf), float4(-inf), float4(-inf)};
+    };
+    // extend(acc, bin k): min(bin, acc) and max(bin, acc), as canopy.math's extend.
+    auto const take = [&](std::array<float4, 6>& acc, std::size_t k) {
+        for (std::size_t c = 0; c < 3; ++c) {
+            acc[c] = simd::min(plane[c * bins + k], acc[c]);
+            acc[3 + c] = simd::max(plane[(3 + c) * bins + k], acc[3 + c]);
+        }
+    };
+    // The costs of all boundaries, lane by lane: area × blocks on each side (blocks: leaf_tests,
+    // by shift; block sizes are powers of two), formed in float as Embree's binner forms them.
+    int const shift = std::countr_zero(block_size);
+    int4 const round_up(std::int32_t(block_size) - 1);
+    auto const blocks = [&](int4 n) { return simd::convert_to_float((n + round_up) >> shift); };
+    float4* const right_cost = scratch.sweep_right.data();
+    auto acc = empty_box();
+    int4 n(0);
+    for (std::size_t k = bins - 1; k > 0; --k) {
+        take(acc, k);
+        n = n + bin_count[k];
+        right_cost[k] = area(acc) * blocks(n);
+    }
+    // From the left: the cheapest boundary of each axis (lane), the first one on ties, among
+    // those that leave both sides non-empty.
+    float const inf = std::numeric_limits<float>::infinity();
+    acc = empty_box();
+    n = int4(0);
+    int4 const all = int4(std::int32_t(count));
+    float4 best_cost(inf);
+    int4 best_k(0);
+    for (std::size_t k = 1; k < bins; ++k) {
+        take(acc, k - 1);
+        n = n + bin_count[k - 1];
+        float4 const cost = area(acc) * blocks(n) + right_cost[k];
+        auto const better = (cost < best_cost) & (n != int4(0)) & (n != all);
+        best_cost = simd::select(better, cost, best_cost);
+        best_k = simd::select(better, int4(std::int32_t(k)), best_k);
+    }
+    alignas(16) float costs[4];
+    alignas(16) std::int32_t ks[4];
+    best_cost.store_aligned(costs);
+    best_k.store_aligned(ks);
+    split_choice best;
+    for (std::size_t a = 0; a < 3; ++a)
+        if (binning.usable[a] && double(costs[a]) < best.cost) best = {double(costs[a]), int(a), int(ks[a])};
+    return best;
+}
+
+// centroid_bins::side_bounds over the vector bins.
+template <typename S>
+    requires vector_binning<S>
+void side_bounds_vector(centroid_bins<S> const& binning, bin_scratch<S> const& scratch, split_choice const& split,
+                        basic_aabb<S>& left, basic_aabb<S>& right) {
+    vector_bin const* const b = scratch.vector_bins.data() + std::size_t(split.axis * binning.bins);
+    float const inf = std::numeric_limits<float>::infinity();
+    vector_bin sides[2] = {{simd::float4(inf), simd::float4(-inf)}, {simd::float4(inf), simd::float4(-inf)}};
+    for (int k = 0; k < binning.bins; ++k) {
+        auto& side = sides[k < split.split ? 0 : 1];
+        side.lo = simd::min(b[k].lo, side.lo);
+        side.hi = simd::max(b[k].hi, side.hi);
+    }
+    for (int i = 0; i < 2; ++i) {
+        alignas(16) float l[4], h[4];
+        sides[i].lo.store_aligned(l);
+        sides[i].hi.store_aligned(h);
+        (i == 0 ? left : right) = {vec3<float>(l[0], l[1], l[2]), vec3<float>(h[0], h[1], h[2])};
     }
 }
 
@@ -155,8 +262,11 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
     int const bins = int(std::min<std::size_t>(std::size_t(opt.bins), std::max<std::size_t>(count, 2)));
     centroid_bins<S> const binning(range.centroids, bins);
     bin_refs(binning, ctx.refs.data(), begin, end, scratch);
-    bin<S> const* const bin_data = scratch.bins.data();
-    split_choice const best = binning.best_split(bin_data, count, ctx.block_size, scratch.right_cost);
+    split_choice best;
+    if constexpr (vector_binning<S>)
+        best = best_split_vector(binning, scratch, count, ctx.block_size);
+    else
+        best = binning.best_split(scratch.bins.data(), count, ctx.block_size, scratch.right_cost);
     if (leaf_is_cheaper(opt, count, ctx.block_size, double(surface_area(bounds)), best)) return make_leaf();
 
     // Partition in place by the chosen bin boundary, gathering the children's centroid bounds on
@@ -178,7 +288,10 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
             }
         }
         mid = i;
-        binning.side_bounds(bin_data, best, left.bounds, right.bounds);
+        if constexpr (vector_binning<S>)
+            side_bounds_vector(binning, scratch, best, left.bounds, right.bounds);
+        else
+            binning.side_bounds(scratch.bins.data(), best, left.bounds, right.bounds);
     } else {
         mid = begin + count / 2;
         left = bounds_of(ctx, begin, mid);
