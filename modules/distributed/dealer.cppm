@@ -10,6 +10,9 @@
 // same counter and computes them. Only the main threads call MPI (MPI_THREAD_FUNNELED); the work
 // may use oneTBB inside a range.
 //
+// A rank other than 0 keeps one request ahead: it asks for its next range before it computes
+// the current one, so the answer's latency (rank 0's polling, the network) hides behind the work.
+//
 // Results are gathered on rank 0: collect(range, bytes) is called there for every range, in the
 // order the results arrive, serialised (never two at once). A range's bytes are whatever work()
 // returned for it on the rank that computed it. The ranges are the same whatever the rank count
@@ -60,9 +63,11 @@ export struct deal_report {
     double seconds = 0.0;                  // deal() from start to end on this rank
     std::vector<std::size_t> items_per_rank; // rank 0 only: every rank's items
     std::uint64_t messages = 0;            // rank 0 only: requests and results received
+    double serve_seconds = 0.0;            // rank 0 only: its main thread receiving and answering
+                                           // them (the serial part of the dealing)
 };
 
-enum tag : int { request_tag = 1, error_tag = 2, assign_tag = 3 };
+enum tag : int { request_tag = 1, result_tag = 2, error_tag = 3, assign_tag = 4 };
 
 // The next range of a counter: guided, shrinking to single items.
 struct counter {
@@ -146,6 +151,10 @@ export deal_report deal(communicator const& comm, std::size_t items, work_functi
         local_worker();
     } else if (comm.root()) {
         std::thread worker(local_worker);
+        // Per rank: ranges dealt and not yet gathered, and whether it has been told "no more"
+        // (or has stopped on an error).
+        std::vector<std::size_t> outstanding(std::size_t(comm.size()), 0);
+        std::vector<char> finished(std::size_t(comm.size()), 0);
         int active = comm.size() - 1;
         std::vector<std::byte> buffer;
         try {
@@ -157,35 +166,41 @@ export deal_report deal(communicator const& comm, std::size_t items, work_functi
                     std::this_thread::sleep_for(std::chrono::microseconds(50));
                     continue;
                 }
+                auto const served = std::chrono::steady_clock::now();
                 int bytes = 0;
                 check(MPI_Get_count(&status, MPI_BYTE, &bytes), "MPI_Get_count");
                 buffer.resize(std::size_t(bytes));
-                check(MPI_Recv(buffer.data(), bytes, MPI_BYTE, status.MPI_SOURCE, status.MPI_TAG, comm.handle(),
-                               MPI_STATUS_IGNORE),
+                int const from = status.MPI_SOURCE;
+                check(MPI_Recv(buffer.data(), bytes, MPI_BYTE, from, status.MPI_TAG, comm.handle(), MPI_STATUS_IGNORE),
                       "MPI_Recv");
                 ++report.messages;
+                std::size_t const r = std::size_t(from);
+                bool const was_done = finished[r] && outstanding[r] == 0;
                 if (status.MPI_TAG == error_tag) { // that rank stopped; agree() brings its message
                     dealer.stop();
-                    --active;
-                    continue;
-                }
-                std::uint64_t header[2];
-                if (buffer.size() < sizeof header) throw std::runtime_error("a malformed request from a rank");
-                std::memcpy(header, buffer.data(), sizeof header);
-                if (header[1] > 0) {
+                    finished[r] = 1;
+                    outstanding[r] = 0;
+                } else if (status.MPI_TAG == result_tag) {
+                    std::uint64_t header[2];
+                    if (buffer.size() < sizeof header) throw std::runtime_error("a malformed result from a rank");
+                    std::memcpy(header, buffer.data(), sizeof header);
+                    if (outstanding[r] > 0) --outstanding[r];
                     bool stopped;
                     {
                         std::lock_guard lock(dealer.mutex);
                         stopped = dealer.stopped;
                     }
                     if (!stopped)
-                        gather(status.MPI_SOURCE, {header[0], header[1]},
-                               std::span<std::byte const>(buffer).subspan(sizeof header));
+                        gather(from, {header[0], header[1]}, std::span<std::byte const>(buffer).subspan(sizeof header));
+                } else { // a request: the next range, or none
+                    item_range const next = dealer.take();
+                    std::uint64_t const answer[2] = {next.first, next.count};
+                    check(MPI_Send(answer, 2, MPI_UINT64_T, from, assign_tag, comm.handle()), "MPI_Send");
+                    if (next.count > 0) ++outstanding[r];
+                    else finished[r] = 1;
                 }
-                item_range const next = dealer.take();
-                std::uint64_t const answer[2] = {next.first, next.count};
-                check(MPI_Send(answer, 2, MPI_UINT64_T, status.MPI_SOURCE, assign_tag, comm.handle()), "MPI_Send");
-                if (next.count == 0) --active;
+                if (!was_done && finished[r] && outstanding[r] == 0) --active;
+                report.serve_seconds += since(served);
             }
         } catch (...) {
             // An MPI failure here leaves ranks waiting for an answer: end the job.
@@ -196,35 +211,47 @@ export deal_report deal(communicator const& comm, std::size_t items, work_functi
         }
         worker.join();
     } else {
-        std::vector<std::byte> message(2 * sizeof(std::uint64_t));
-        std::uint64_t header[2] = {0, 0};
+        // One range ahead: the request for the next range goes out before this one is computed,
+        // so the answer's latency hides behind the work.
+        std::uint64_t current[2] = {0, 0}, next[2] = {0, 0};
+        std::vector<std::byte> message;
+        MPI_Request pending = MPI_REQUEST_NULL;
+        auto const wait_for_next = [&] {
+            auto const asked = std::chrono::steady_clock::now();
+            check(MPI_Wait(&pending, MPI_STATUS_IGNORE), "MPI_Wait");
+            report.wait_seconds += since(asked);
+            current[0] = next[0];
+            current[1] = next[1];
+        };
+        auto const request = [&] {
+            check(MPI_Irecv(next, 2, MPI_UINT64_T, 0, assign_tag, comm.handle(), &pending), "MPI_Irecv");
+            check(MPI_Send(nullptr, 0, MPI_BYTE, 0, request_tag, comm.handle()), "MPI_Send");
+        };
+        request();
+        wait_for_next();
         try {
-            for (;;) {
-                std::memcpy(message.data(), header, sizeof header);
-                if (message.size() > std::size_t(std::numeric_limits<int>::max()))
-                    throw std::runtime_error("the result of items " + std::to_string(header[0]) + " to " +
-                                             std::to_string(header[0] + header[1] - 1) +
-                                             " is over 2 GiB: too large for one message");
-                auto const asked = std::chrono::steady_clock::now();
-                check(MPI_Send(message.data(), int(message.size()), MPI_BYTE, 0, request_tag, comm.handle()), "MPI_Send");
-                std::uint64_t answer[2];
-                check(MPI_Recv(answer, 2, MPI_UINT64_T, 0, assign_tag, comm.handle(), MPI_STATUS_IGNORE), "MPI_Recv");
-                report.wait_seconds += since(asked);
-                if (answer[1] == 0) break;
-                std::vector<std::byte> const bytes = work({answer[0], answer[1]});
-                report.items += answer[1];
+            while (current[1] > 0) {
+                request();
+                std::vector<std::byte> const bytes = work({current[0], current[1]});
+                report.items += current[1];
                 ++report.ranges;
                 report.result_bytes += bytes.size();
-                header[0] = answer[0];
-                header[1] = answer[1];
-                message.resize(sizeof header + bytes.size());
-                std::memcpy(message.data() + sizeof header, bytes.data(), bytes.size());
+                message.resize(sizeof current + bytes.size());
+                if (message.size() > std::size_t(std::numeric_limits<int>::max()))
+                    throw std::runtime_error("the result of items " + std::to_string(current[0]) + " to " +
+                                             std::to_string(current[0] + current[1] - 1) +
+                                             " is over 2 GiB: too large for one message");
+                std::memcpy(message.data(), current, sizeof current);
+                std::memcpy(message.data() + sizeof current, bytes.data(), bytes.size());
+                check(MPI_Send(message.data(), int(message.size()), MPI_BYTE, 0, result_tag, comm.handle()), "MPI_Send");
+                wait_for_next();
             }
         } catch (...) {
             error = what(std::current_exception());
             check(MPI_Send(error.data(), int(std::min<std::size_t>(error.size(), 1u << 20)), MPI_CHAR, 0, error_tag,
                            comm.handle()),
                   "MPI_Send");
+            if (pending != MPI_REQUEST_NULL) check(MPI_Wait(&pending, MPI_STATUS_IGNORE), "MPI_Wait");
         }
     }
     report.seconds = since(start);
