@@ -193,3 +193,21 @@ TEST_CASE("session: launched_by_mpirun() reads the launcher's environment") {
         CHECK(comm.rank() == 0);
     }
 }
+
+TEST_CASE("dealer: rank 0 failing to collect a result stops every rank with its message") {
+    dist::communicator const comm = dist::communicator::world();
+    bool thrown = false;
+    try {
+        dist::deal(comm, 300, [](dist::item_range r) {
+            std::this_thread::sleep_for(std::chrono::microseconds(200));
+            return result_of(r);
+        }, [](dist::item_range r, std::span<std::byte const>) {
+            if (r.first + r.count > 100) throw std::runtime_error("disk full after item 100");
+        }, {.max_batch = 4, .progress = {}});
+    } catch (dist::remote_failure const& e) {
+        thrown = true;
+        CHECK(e.rank == 0);
+        CHECK(std::string(e.what()) == "disk full after item 100");
+    }
+    CHECK(thrown);
+}

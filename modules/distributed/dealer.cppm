@@ -130,6 +130,12 @@ export deal_report deal(communicator const& comm, std::size_t items, work_functi
         report.items_per_rank[std::size_t(from)] += r.count;
         if (options.progress) options.progress(gathered, items);
     };
+    // Rank 0's failures (its work, or collect): the first is its error; the dealing stops.
+    auto const record_failure = [&] {
+        dealer.stop();
+        std::lock_guard lock(collect_mutex);
+        if (error.empty()) error = what(std::current_exception());
+    };
     // Rank 0's own share: takes ranges until none is left or something failed.
     auto const local_worker = [&] {
         try {
@@ -141,9 +147,7 @@ export deal_report deal(communicator const& comm, std::size_t items, work_functi
                 gather(0, r, bytes);
             }
         } catch (...) {
-            dealer.stop();
-            std::lock_guard lock(collect_mutex);
-            if (error.empty()) error = what(std::current_exception());
+            record_failure();
         }
     };
 
@@ -190,8 +194,12 @@ export deal_report deal(communicator const& comm, std::size_t items, work_functi
                         std::lock_guard lock(dealer.mutex);
                         stopped = dealer.stopped;
                     }
-                    if (!stopped)
-                        gather(from, {header[0], header[1]}, std::span<std::byte const>(buffer).subspan(sizeof header));
+                    if (!stopped) try {
+                            gather(from, {header[0], header[1]},
+                                   std::span<std::byte const>(buffer).subspan(sizeof header));
+                        } catch (...) { // collect() failed: stop, and agree() below carries it
+                            record_failure();
+                        }
                 } else { // a request: the next range, or none
                     item_range const next = dealer.take();
                     std::uint64_t const answer[2] = {next.first, next.count};
