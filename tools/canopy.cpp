@@ -25,6 +25,11 @@
 // queries (--mode batch: groups of 8 coherent rays as packets); the hit files are the same byte
 // for byte.
 //
+// Under mpirun (a build with CANOPY_WITH_MPI, more than one process), `render` and `trace` share
+// their work out across the processes (canopy.distributed: tiles, or chunks of the ray file, dealt
+// out by rank 0), with the same outputs byte for byte; rank 0 alone writes and prints, and a
+// failure on any rank stops all with its message. Without mpirun, MPI is never touched.
+//
 // Exit status: 0 success; 1 an error in an input, an output or a limit (the message names the
 // file and the problem); 2 a usage error (unknown, missing, repeated or malformed option, followed
 // by the command's usage). Numbers are read whole and range-checked. Output files are checked
@@ -103,7 +108,7 @@ bool root_rank() { return true; }
 
 // How the ranks shared the last job out (printed by rank 0 under mpirun).
 struct sharing_report {
-    std::size_t rank_count = 1, ranges = 0;
+    std::size_t rank_count = 1;
     std::uint64_t messages = 0, bytes = 0;
     std::vector<std::size_t> items_per_rank;
     std::vector<double> wait_seconds, ranges_per_rank;
@@ -113,7 +118,7 @@ sharing_report last_sharing;
 #if CANOPY_WITH_MPI
 // Collective: every rank's share of a deal, on rank 0.
 void record_sharing(dist::deal_report const& r) {
-    last_sharing = {std::size_t(ranks.size()), r.ranges, r.messages, ranks.sum(r.result_bytes), r.items_per_rank,
+    last_sharing = {std::size_t(ranks.size()), r.messages, ranks.sum(r.result_bytes), r.items_per_rank,
                     ranks.gather(r.wait_seconds), ranks.gather(double(r.ranges))};
 }
 #endif
@@ -122,7 +127,7 @@ void record_sharing(dist::deal_report const& r) {
 void print_sharing(char const* what) {
     if (!distributed() || !root_rank()) return;
     sharing_report const& r = last_sharing;
-    std::string shares, waits;
+    std::string shares;
     double ranges = 0.0, waited = 0.0;
     for (std::size_t k = 0; k < r.items_per_rank.size(); ++k) {
         shares += fmt::format("{}{}", k ? "/" : "", r.items_per_rank[k]);
@@ -552,7 +557,7 @@ void print_trace(loaded_scene const& scene, trace_setup const& setup, std::uint6
                trace_seconds * 1e3, timing, trace_seconds > 0 ? double(rays) / trace_seconds * 1e-6 : 0.0, hit_count);
 }
 
-int trace_across_ranks(trace_setup const& setup, int reps);
+int trace_across_ranks(trace_setup const& setup);
 
 int run_trace(std::span<char*> all_args) {
     arguments const args = parse_arguments(all_args, {{"--scene"}, {"--rays"}, {"--query"}, {"--out"}, {"--intersector"},
@@ -580,7 +585,7 @@ int run_trace(std::span<char*> all_args) {
     trace_setup const setup{scene_path, rays_path, out_path, mode, query == "closest", mode == "batch",
                             isect_name == "alpha", reps, quality};
 #if CANOPY_WITH_MPI
-    if (distributed()) return trace_across_ranks(setup, reps);
+    if (distributed()) return trace_across_ranks(setup);
 #endif
 
     check_writable(out_path);
@@ -653,7 +658,7 @@ private:
 // the same chunks as one process traces) are dealt out in ranges; each rank reads only its ranges'
 // rays, at their offset, and traces them with oneTBB; rank 0 writes the hits at their offset. The
 // hits are the same, byte for byte, as one process's.
-int trace_across_ranks(trace_setup const& setup, int reps) {
+int trace_across_ranks(trace_setup const& setup) {
     std::optional<partial_output> output;
     std::unique_ptr<loaded_scene> scene;
     std::uint64_t ray_count = 0;
@@ -694,7 +699,7 @@ int trace_across_ranks(trace_setup const& setup, int reps) {
         output->write(20 * r.first * trace_chunk, bytes.subspan(sizeof counts));
     };
     dist::deal_report report;
-    double const trace_seconds = timed_passes(reps, [&] {
+    double const trace_seconds = timed_passes(setup.reps, [&] {
         packets = hit_count = 0;
         report = dist::deal(ranks, chunks, work, collect);
     });
