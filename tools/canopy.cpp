@@ -557,7 +557,9 @@ void print_trace(loaded_scene const& scene, trace_setup const& setup, std::uint6
                trace_seconds * 1e3, timing, trace_seconds > 0 ? double(rays) / trace_seconds * 1e-6 : 0.0, hit_count);
 }
 
+#if CANOPY_WITH_MPI
 int trace_across_ranks(trace_setup const& setup);
+#endif
 
 int run_trace(std::span<char*> all_args) {
     arguments const args = parse_arguments(all_args, {{"--scene"}, {"--rays"}, {"--query"}, {"--out"}, {"--intersector"},
