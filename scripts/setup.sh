@@ -18,6 +18,7 @@ apt_packages=(
   glmark2-data libcgal-demo
   valgrind libgmp-dev python3-matplotlib
   libopenmesh-dev libtinygltf-dev nlohmann-json3-dev assimp-testmodels
+  libopenmpi-dev openmpi-bin
 )
 # The machine image ships Node.js with its own npm; Debian's npm would conflict with it.
 command -v npm >/dev/null 2>&1 || apt_packages+=(npm)

@@ -25,6 +25,11 @@
 // queries (--mode batch: groups of 8 coherent rays as packets); the hit files are the same byte
 // for byte.
 //
+// Under mpirun (a build with CANOPY_WITH_MPI, more than one process), `render` and `trace` share
+// their work out across the processes (canopy.distributed: tiles, or chunks of the ray file, dealt
+// out by rank 0), with the same outputs byte for byte; rank 0 alone writes and prints, and a
+// failure on any rank stops all with its message. Without mpirun, MPI is never touched.
+//
 // Exit status: 0 success; 1 an error in an input, an output or a limit (the message names the
 // file and the problem); 2 a usage error (unknown, missing, repeated or malformed option, followed
 // by the command's usage). Numbers are read whole and range-checked. Output files are checked
@@ -42,6 +47,7 @@
 #include <cstring>
 #include <exception>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -65,6 +71,9 @@ import canopy.bench_formats;
 import canopy.billboard_forest;
 import canopy.image_io;
 import canopy.plugins;
+#if CANOPY_WITH_MPI
+import canopy.distributed;
+#endif
 
 namespace {
 
@@ -82,6 +91,81 @@ struct usage_error : std::runtime_error {
 std::string current_step = "starting";
 
 void step(std::string what) { current_step = std::move(what); }
+
+// ---- processes (mpirun) ------------------------------------------------------------------------
+// Started by mpirun, with more than one process: `render` and `trace` share their work out
+// (canopy.distributed); rank 0 writes the outputs and prints, the other ranks print nothing.
+// Started without mpirun, the program never touches MPI.
+#if CANOPY_WITH_MPI
+namespace dist = canopy::distributed;
+dist::communicator ranks; // solo (rank 0 of 1) unless under mpirun
+bool distributed() { return ranks.size() > 1; }
+bool root_rank() { return ranks.root(); }
+#else
+bool distributed() { return false; }
+bool root_rank() { return true; }
+#endif
+
+// How the ranks shared the last job out (printed by rank 0 under mpirun).
+struct sharing_report {
+    std::size_t rank_count = 1;
+    std::uint64_t messages = 0, bytes = 0;
+    std::vector<std::size_t> items_per_rank;
+    std::vector<double> wait_seconds, ranges_per_rank;
+};
+sharing_report last_sharing;
+
+#if CANOPY_WITH_MPI
+// Collective: every rank's share of a deal, on rank 0.
+void record_sharing(dist::deal_report const& r) {
+    last_sharing = {std::size_t(ranks.size()), r.messages, ranks.sum(r.result_bytes), r.items_per_rank,
+                    ranks.gather(r.wait_seconds), ranks.gather(double(r.ranges))};
+}
+#endif
+
+// Under mpirun: how the work was shared (rank 0, standard error).
+void print_sharing(char const* what) {
+    if (!distributed() || !root_rank()) return;
+    sharing_report const& r = last_sharing;
+    std::string shares;
+    double ranges = 0.0, waited = 0.0;
+    for (std::size_t k = 0; k < r.items_per_rank.size(); ++k) {
+        shares += fmt::format("{}{}", k ? "/" : "", r.items_per_rank[k]);
+        ranges += r.ranges_per_rank[k];
+        if (k > 0) waited += r.wait_seconds[k];
+    }
+    double const remote_ranges = ranges - (r.ranges_per_rank.empty() ? 0.0 : r.ranges_per_rank[0]);
+    fmt::print(stderr, "{} ranks: {} per rank {}, {} ranges, {} messages to rank 0, {:.2f} MB gathered, {:.3f} ms "
+                       "waited per range away from rank 0\n",
+               r.rank_count, what, shares, ranges, r.messages, double(r.bytes) * 1e-6,
+               remote_ranges > 0 ? waited / remote_ranges * 1e3 : 0.0);
+}
+
+// The message of an exception, as the program prints it after "canopy: ".
+std::string error_text(std::exception_ptr error) {
+    try {
+        std::rethrow_exception(error);
+    } catch (std::bad_alloc const&) {
+        return "out of memory while " + current_step;
+    } catch (std::length_error const& e) {
+        return "an allocation too large for memory while " + current_step + " (" + e.what() + ")";
+    } catch (std::exception const& e) {
+        return e.what();
+    } catch (...) {
+        return "unexpected error while " + current_step;
+    }
+}
+
+// Runs step() on every rank; under mpirun every rank then learns whether any rank failed, and
+// all stop with the message of the lowest failing one (canopy::distributed::agree), instead of
+// waiting for a rank that gave up.
+template <typename Step>
+void on_every_rank(Step&& step) {
+#if CANOPY_WITH_MPI
+    if (distributed()) return dist::checked(ranks, step, error_text);
+#endif
+    step();
+}
 
 constexpr char const* main_usage =
     "usage: canopy <command> [options]\n"
@@ -416,11 +500,72 @@ std::size_t trace_rays(loaded_scene const& scene, std::span<canopy::ray const> r
     return stats.packets;
 }
 
+struct trace_setup {
+    std::string scene_path, rays_path, out_path, mode;
+    bool closest = true, batch = false, alpha = false;
+    int reps = 0;
+    canopy::build_quality quality = canopy::build_quality::automatic;
+};
+
+// Chunks of trace_chunk rays (a multiple of 8: the batch queries' groups are the same whatever
+// the threads and processes), as many at once as the threads take; returns the packets traced.
+std::size_t trace_chunks(loaded_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> hits,
+                         trace_setup const& setup) {
+    std::size_t const chunks = (rays.size() + trace_chunk - 1) / trace_chunk;
+    std::atomic<std::size_t> packets{0};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](auto const& range) {
+        canopy::default_intersector none;
+        canopy::bench_alpha_intersector alpha;
+        std::size_t n = 0;
+        for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            std::size_t const first = c * trace_chunk, count = std::min(trace_chunk, rays.size() - first);
+            std::span<canopy::ray const> const in(rays.data() + first, count);
+            std::span<canopy::bench_hit> const out(hits.data() + first, count);
+            n += setup.alpha ? trace_rays(scene, in, out, setup.closest, setup.batch, alpha)
+                             : trace_rays(scene, in, out, setup.closest, setup.batch, none);
+        }
+        packets += n;
+    });
+    return packets;
+}
+
+// The seconds of one pass, or with --reps N the median of N passes after a warm-up pass.
+template <typename Pass>
+double timed_passes(int reps, Pass const& pass) {
+    auto const timed = [&] {
+        auto const start = clock_type::now();
+        pass();
+        return seconds_since(start);
+    };
+    if (reps == 0) return timed();
+    timed(); // warm-up
+    std::vector<double> times;
+    for (int r = 0; r < reps; ++r) times.push_back(timed());
+    std::sort(times.begin(), times.end());
+    std::size_t const mid = times.size() / 2;
+    return times.size() % 2 == 1 ? times[mid] : 0.5 * (times[mid - 1] + times[mid]);
+}
+
+void print_trace(loaded_scene const& scene, trace_setup const& setup, std::uint64_t rays, std::uint64_t packets,
+                 std::uint64_t hit_count, double trace_seconds) {
+    std::string const timing =
+        setup.reps == 0 ? std::string() : fmt::format(" (median of {} after a warm-up pass)", setup.reps);
+    std::string const how =
+        setup.batch ? fmt::format("batch: {} packets of 8, {} single rays", packets, rays - 8 * packets) : setup.mode;
+    fmt::print("build {:.3f} ms at quality {}, trace {} rays ({}) in {:.3f} ms{}: {:.2f} Mrays/s, {} hits\n",
+               scene.build_seconds * 1e3, quality_used(setup.quality, scene.mesh.quality), rays, how,
+               trace_seconds * 1e3, timing, trace_seconds > 0 ? double(rays) / trace_seconds * 1e-6 : 0.0, hit_count);
+}
+
+#if CANOPY_WITH_MPI
+int trace_across_ranks(trace_setup const& setup);
+#endif
+
 int run_trace(std::span<char*> all_args) {
     arguments const args = parse_arguments(all_args, {{"--scene"}, {"--rays"}, {"--query"}, {"--out"}, {"--intersector"},
                                                       {"--mode"}, {"--reps"}, {"--threads"}, {"--quality"}});
     if (args.help) {
-        std::fputs(trace_usage.c_str(), stdout);
+        if (root_rank()) std::fputs(trace_usage.c_str(), stdout);
         return 0;
     }
     if (!args.positional.empty()) throw usage_error("unexpected argument " + quote(args.positional.front()));
@@ -439,6 +584,11 @@ int run_trace(std::span<char*> all_args) {
     std::string const mode = args.value_or("--mode", "single");
     if (mode != "single" && mode != "batch") throw usage_error("--mode must be single or batch, not " + quote(mode));
     int const reps = args.has("--reps") ? int(whole_option(args, "--reps", 1, 1000)) : 0;
+    trace_setup const setup{scene_path, rays_path, out_path, mode, query == "closest", mode == "batch",
+                            isect_name == "alpha", reps, quality};
+#if CANOPY_WITH_MPI
+    if (distributed()) return trace_across_ranks(setup);
+#endif
 
     check_writable(out_path);
     auto const scene = load_bench_scene(scene_path, quality);
@@ -448,59 +598,124 @@ int run_trace(std::span<char*> all_args) {
     if (rays.empty()) throw canopy::scene_error(rays_path, "", "holds no rays (the file is empty): nothing to trace");
     step("tracing " + rays_path);
     std::vector<canopy::bench_hit> hits(rays.size());
-    bool const closest = query == "closest";
-
-    bool const batch = mode == "batch";
-    // Chunks of trace_chunk rays (a multiple of 8: the batch queries' groups are the same whatever
-    // the threads), as many as the threads take.
-    std::size_t const chunks = (rays.size() + trace_chunk - 1) / trace_chunk;
-    std::atomic<std::size_t> packets{0};
-    auto const pass = [&] {
-        packets = 0;
-        auto const start = clock_type::now();
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](auto const& range) {
-            canopy::default_intersector none;
-            canopy::bench_alpha_intersector alpha;
-            std::size_t n = 0;
-            for (std::size_t c = range.begin(); c != range.end(); ++c) {
-                std::size_t const first = c * trace_chunk, count = std::min(trace_chunk, rays.size() - first);
-                std::span<canopy::ray const> const in(rays.data() + first, count);
-                std::span<canopy::bench_hit> const out(hits.data() + first, count);
-                n += isect_name == "alpha" ? trace_rays(*scene, in, out, closest, batch, alpha)
-                                           : trace_rays(*scene, in, out, closest, batch, none);
-            }
-            packets += n;
-        });
-        return seconds_since(start);
-    };
-    double trace_seconds = 0.0;
-    if (reps == 0) {
-        trace_seconds = pass();
-    } else {
-        pass(); // warm-up
-        std::vector<double> times;
-        for (int r = 0; r < reps; ++r) times.push_back(pass());
-        std::sort(times.begin(), times.end());
-        std::size_t const mid = times.size() / 2;
-        trace_seconds = times.size() % 2 == 1 ? times[mid] : 0.5 * (times[mid - 1] + times[mid]);
-    }
+    std::size_t packets = 0;
+    double const trace_seconds = timed_passes(reps, [&] {
+        packets = trace_chunks(*scene, rays, hits, setup);
+    });
     step("writing " + out_path);
     canopy::write_bench_hits(out_path, hits);
 
     std::size_t const hit_count = std::size_t(std::count_if(hits.begin(), hits.end(), [](auto const& h) {
         return h.prim != canopy::invalid_id;
     }));
-    std::string const timing =
-        reps == 0 ? std::string() : fmt::format(" (median of {} after a warm-up pass)", reps);
-    std::string const how = batch ? fmt::format("batch: {} packets of 8, {} single rays", packets.load(),
-                                                rays.size() - 8 * packets.load())
-                                  : mode;
-    fmt::print("build {:.3f} ms at quality {}, trace {} rays ({}) in {:.3f} ms{}: {:.2f} Mrays/s, {} hits\n",
-               scene->build_seconds * 1e3, quality_used(quality, scene->mesh.quality), rays.size(), how,
-               trace_seconds * 1e3, timing, trace_seconds > 0 ? double(rays.size()) / trace_seconds * 1e-6 : 0.0,
-               hit_count);
+    print_trace(*scene, setup, rays.size(), packets, hit_count, trace_seconds);
     return 0;
 }
+
+#if CANOPY_WITH_MPI
+// The hits file of a trace under mpirun, on rank 0: written at each range's offset into OUT.partial
+// as the results arrive, renamed to OUT when all is written, so that a job that dies leaves no file
+// under OUT's name (an OUT that is not a regular file, a device, is written in place). Removed
+// when the trace fails.
+class partial_output {
+public:
+    explicit partial_output(std::filesystem::path out) : out_(std::move(out)) {
+        std::error_code ec;
+        bool const regular = !std::filesystem::exists(out_, ec) || std::filesystem::is_regular_file(out_, ec);
+        path_ = regular ? std::filesystem::path(out_.string() + ".partial") : out_;
+        fd_ = ::open(path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+        if (fd_ < 0) throw output_error(path_.string() + ": cannot be written: " + os_reason(errno));
+    }
+    partial_output(partial_output const&) = delete;
+    partial_output& operator=(partial_output const&) = delete;
+    ~partial_output() {
+        if (fd_ >= 0) ::close(fd_);
+        if (!done_ && path_ != out_) ::unlink(path_.c_str());
+    }
+
+    void write(std::uint64_t offset, std::span<std::byte const> bytes) {
+        for (std::size_t done = 0; done < bytes.size();) {
+            ssize_t const n = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, off_t(offset + done));
+            if (n < 0 && errno == EINTR) continue;
+            if (n <= 0) throw output_error(out_.string() + ": cannot write: " + os_reason(n < 0 ? errno : ENOSPC));
+            done += std::size_t(n);
+        }
+    }
+
+    void commit() {
+        int const fd = std::exchange(fd_, -1);
+        if (::close(fd) != 0) throw output_error(out_.string() + ": cannot write: " + os_reason(errno));
+        if (path_ != out_ && std::rename(path_.c_str(), out_.c_str()) != 0)
+            throw output_error(out_.string() + ": cannot rename " + path_.string() + " to it: " + os_reason(errno));
+        done_ = true;
+    }
+
+private:
+    std::filesystem::path out_, path_;
+    int fd_ = -1;
+    bool done_ = false;
+};
+
+// canopy trace under mpirun: every rank loads the scene; the ray file's chunks (trace_chunk rays,
+// the same chunks as one process traces) are dealt out in ranges; each rank reads only its ranges'
+// rays, at their offset, and traces them with oneTBB; rank 0 writes the hits at their offset. The
+// hits are the same, byte for byte, as one process's.
+int trace_across_ranks(trace_setup const& setup) {
+    std::optional<partial_output> output;
+    std::unique_ptr<loaded_scene> scene;
+    std::uint64_t ray_count = 0;
+    on_every_rank([&] {
+        if (root_rank()) {
+            check_writable(setup.out_path);
+            output.emplace(setup.out_path);
+        }
+        scene = load_bench_scene(setup.scene_path, setup.quality);
+        step("reading " + setup.rays_path);
+        ray_count = canopy::count_bench_rays(setup.rays_path);
+        if (ray_count == 0)
+            throw canopy::scene_error(setup.rays_path, "", "holds no rays (the file is empty): nothing to trace");
+    });
+    step("tracing " + setup.rays_path);
+    std::size_t const chunks = std::size_t((ray_count + trace_chunk - 1) / trace_chunk);
+    std::uint64_t packets = 0, hit_count = 0;
+    // A range's result: its packets and hits (two uint64), then its hits as the hit file holds them.
+    auto const work = [&](dist::item_range r) {
+        std::uint64_t const first = r.first * trace_chunk;
+        std::uint64_t const count = std::min<std::uint64_t>(r.count * trace_chunk, ray_count - first);
+        std::vector<canopy::ray> const rays = canopy::read_bench_rays(setup.rays_path, first, count, ray_count);
+        std::vector<canopy::bench_hit> hits(rays.size());
+        std::uint64_t const counts[2] = {
+            trace_chunks(*scene, rays, hits, setup),
+            std::uint64_t(std::count_if(hits.begin(), hits.end(), [](auto const& h) { return h.prim != canopy::invalid_id; }))};
+        std::string const encoded = canopy::encode_bench_hits(hits);
+        std::vector<std::byte> bytes(sizeof counts + encoded.size());
+        std::memcpy(bytes.data(), counts, sizeof counts);
+        std::memcpy(bytes.data() + sizeof counts, encoded.data(), encoded.size());
+        return bytes;
+    };
+    auto const collect = [&](dist::item_range r, std::span<std::byte const> bytes) {
+        std::uint64_t counts[2];
+        std::memcpy(counts, bytes.data(), sizeof counts);
+        packets += counts[0];
+        hit_count += counts[1];
+        output->write(20 * r.first * trace_chunk, bytes.subspan(sizeof counts));
+    };
+    dist::deal_report report;
+    double const trace_seconds = timed_passes(setup.reps, [&] {
+        packets = hit_count = 0;
+        report = dist::deal(ranks, chunks, work, collect);
+    });
+    on_every_rank([&] {
+        if (!root_rank()) return;
+        step("writing " + setup.out_path);
+        output->commit();
+    });
+    record_sharing(report);
+    print_sharing("chunks of 256 rays");
+    if (root_rank()) print_trace(*scene, setup, ray_count, packets, hit_count, trace_seconds);
+    return 0;
+}
+#endif
 
 // ---- render ----------------------------------------------------------------------------------
 
@@ -598,11 +813,24 @@ float ao_radius(canopy::compiled_scene const& scene, render_job const& job) {
     return radius;
 }
 
+// canopy::render_tiles, or across the ranks under mpirun: the image on rank 0 (the other ranks'
+// framebuffers stay black).
+void tiles(canopy::framebuffer& fb, std::function<canopy::vec4<float>(int, int)> const& shade,
+           canopy::tile_options const& options) {
+#if CANOPY_WITH_MPI
+    if (distributed()) {
+        record_sharing(dist::render_tiles(ranks, fb, shade, options));
+        return;
+    }
+#endif
+    canopy::render_tiles(fb, shade, options);
+}
+
 // Shades every pixel with kernel(ray, isect, rng) averaged over spp jittered samples.
 template <typename I, typename Kernel>
 canopy::framebuffer render_with(render_job const& job, I const& prototype, Kernel const& kernel, progress_bar& bar) {
     canopy::framebuffer fb(job.width, job.height);
-    canopy::render_tiles(
+    tiles(
         fb,
         [&](int x, int y) {
             canopy::vec4<float> sum;
@@ -713,12 +941,19 @@ render_result render_image(canopy::compiled_scene const& scene, render_job const
         fb = render_kernel(counted, job, canopy::default_intersector{}, bar);
     }
     render_result result{seconds_since(start), rays.load()};
-    step("writing " + job.output.string());
-    std::size_t nan_pixels = 0;
-    canopy::write_image(job.output, to_display(fb, linear, job, nan_pixels));
-    if (nan_pixels > 0)
-        throw std::runtime_error(fmt::format("{}: {} of {} pixels are not a number (NaN radiance, written black)",
-                                             job.output.string(), nan_pixels, fb.pixels.size()));
+#if CANOPY_WITH_MPI
+    if (distributed()) result.rays = ranks.sum(result.rays);
+#endif
+    print_sharing("tiles");
+    on_every_rank([&] {
+        if (!root_rank()) return;
+        step("writing " + job.output.string());
+        std::size_t nan_pixels = 0;
+        canopy::write_image(job.output, to_display(fb, linear, job, nan_pixels));
+        if (nan_pixels > 0)
+            throw std::runtime_error(fmt::format("{}: {} of {} pixels are not a number (NaN radiance, written black)",
+                                                 job.output.string(), nan_pixels, fb.pixels.size()));
+    });
     return result;
 }
 
@@ -893,7 +1128,7 @@ int run_render(std::span<char*> all_args) {
                                                       {"--plugin", true, true},
                                                       {"--quality"}});
     if (args.help) {
-        std::fputs(render_usage.c_str(), stdout);
+        if (root_rank()) std::fputs(render_usage.c_str(), stdout);
         return 0;
     }
     if (args.positional.size() > 1)
@@ -979,29 +1214,42 @@ int run_render(std::span<char*> all_args) {
                               {"2_texture_alpha_mask.png", nullptr, "alpha"},
                               {"3_procedural_alpha_mask.png", nullptr, "procedural"},
                               {"4_bvh_cost_heatmap.png", "heatmap", "costs"}};
-    prepare_folder(out);
-    if (!scene_path) {
-        for (auto const& f : figures) check_writable(out / f.file);
-    } else {
+    if (scene_path) {
         std::string stem = generator ? generator->name : std::filesystem::path(*scene_path).stem().string();
         if (stem.empty()) stem = "scene";
         base.output = out / (stem + ".png");
-        check_writable(base.output);
     }
+    // Under mpirun, rank 0 alone writes the images, and each rank loads the scene: a failure on any
+    // rank stops every rank with its message.
+    on_every_rank([&] {
+        if (!root_rank()) return;
+        prepare_folder(out);
+        if (!scene_path) {
+            for (auto const& f : figures) check_writable(out / f.file);
+        } else {
+            check_writable(base.output);
+        }
+    });
 
-    canopy::registry const& registry = plugin_registry(args.values("--plugin"));
+    canopy::registry const* registry = nullptr;
+    on_every_rank([&] { registry = &plugin_registry(args.values("--plugin")); });
     std::vector<std::pair<std::string, render_result>> results;
     auto const build_start = clock_type::now();
     if (!scene_path) {
-        std::filesystem::path const texture = std::filesystem::path(CANOPY_ASSET_DIR) / "tree.png";
-        step("loading " + texture.string());
-        auto forest = canopy::make_billboard_forest(load_texture(texture));
+        std::optional<canopy::billboard_forest> loaded_forest;
+        on_every_rank([&] {
+            std::filesystem::path const texture = std::filesystem::path(CANOPY_ASSET_DIR) / "tree.png";
+            step("loading " + texture.string());
+            loaded_forest.emplace(canopy::make_billboard_forest(load_texture(texture)));
+        });
+        auto& forest = *loaded_forest;
         double const build_seconds = seconds_since(build_start);
         base.scene_name = "demo scene";
         base.camera = canopy::pinhole_camera::look_at(forest.camera_eye, forest.camera_target, {0, 1, 0},
                                                       forest.camera_fovy, aspect);
-        fmt::print(stderr, "demo scene: {} instances of {} meshes, built in {:.1f} ms\n",
-                   forest.scene.top_mesh_instances.size(), forest.scene.meshes.size(), build_seconds * 1e3);
+        if (root_rank())
+            fmt::print(stderr, "demo scene: {} instances of {} meshes, built in {:.1f} ms\n",
+                       forest.scene.top_mesh_instances.size(), forest.scene.meshes.size(), build_seconds * 1e3);
         for (auto const& f : figures) {
             render_job job = base;
             if (f.kernel) job.kernel = f.kernel;
@@ -1010,18 +1258,23 @@ int run_render(std::span<char*> all_args) {
             results.emplace_back(job.output.string(), render_image(forest.scene, job));
         }
     } else {
-        auto const loaded = load_and_compile(*scene_path, registry, quality);
+        std::optional<loaded_graph> loaded_scene;
+        on_every_rank([&] {
+            loaded_scene.emplace(load_and_compile(*scene_path, *registry, quality));
+            base.camera = scene_camera(loaded_scene->compiled, *scene_path, aspect);
+        });
+        loaded_graph const& loaded = *loaded_scene;
         canopy::compiled_scene const& scene = loaded.compiled;
         auto const& st = scene.statistics;
-        fmt::print(stderr, "{}: {} triangles in {} meshes, {} placements, {} instance level{}; loaded in {:.1f} ms, "
+        if (root_rank()) fmt::print(stderr, "{}: {} triangles in {} meshes, {} placements, {} instance level{}; loaded in {:.1f} ms, "
                            "compiled in {:.1f} ms (mesh BVHs at quality {})\n",
                    *scene_path, st.triangles_placed, st.meshes_built, st.placements, st.levels, st.levels == 1 ? "" : "s",
                    loaded.load_seconds * 1e3, st.build_seconds * 1e3, quality_name(st.quality));
         base.scene_name = *scene_path;
-        base.camera = scene_camera(scene, *scene_path, aspect);
         if (base.intersector == "auto") base.intersector = st.alpha_mask_needed ? "alpha" : "none";
         results.emplace_back(base.output.string(), render_image(scene, base));
     }
+    if (!root_rank()) return 0;
     double total_seconds = 0.0;
     std::uint64_t total_rays = 0;
     auto const mrays = [](std::uint64_t rays, double seconds) { return seconds > 0.0 ? double(rays) / seconds * 1e-6 : 0.0; };
@@ -1132,14 +1385,15 @@ int finish_standard_output(int status) {
 int run(std::string_view command, std::span<char*> args) {
     try {
         if (command == "--help" || command == "-h") {
-            std::fputs(main_usage, stdout);
+            if (root_rank()) std::fputs(main_usage, stdout);
             return 0;
         }
         if (command == "render") return run_render(args);
         if (command == "trace") return run_trace(args);
-        if (command == "info") return run_info(args);
+        if (command == "info") return root_rank() ? run_info(args) : 0; // info: rank 0 alone
         throw usage_error("unknown command " + quote(command));
     } catch (usage_error const& e) {
+        if (!root_rank()) return 2; // every rank has the same arguments, hence the same error
         bool const known = command == "trace" || command == "render" || command == "info";
         std::fprintf(stderr, "canopy%s%s: %s\n%s", known ? " " : "", known ? std::string(command).c_str() : "",
                      e.what(),
@@ -1148,17 +1402,16 @@ int run(std::string_view command, std::span<char*> args) {
                      : command == "info"   ? info_usage.c_str()
                                            : main_usage);
         return 2;
-    } catch (std::bad_alloc const&) {
-        std::fprintf(stderr, "canopy: out of memory while %s\n", current_step.c_str());
+#if CANOPY_WITH_MPI
+    } catch (dist::remote_failure const& e) {
+        // Every rank has it: rank 0 prints it, naming the rank when it is another one.
+        if (root_rank())
+            std::fprintf(stderr, "canopy: %s%s\n", e.rank == 0 ? "" : fmt::format("rank {}: ", e.rank).c_str(), e.what());
         return 1;
-    } catch (std::length_error const& e) {
-        std::fprintf(stderr, "canopy: an allocation too large for memory while %s (%s)\n", current_step.c_str(), e.what());
-        return 1;
-    } catch (std::exception const& e) {
-        std::fprintf(stderr, "canopy: %s\n", e.what());
-        return 1;
+#endif
     } catch (...) {
-        std::fprintf(stderr, "canopy: unexpected error while %s\n", current_step.c_str());
+        // Under mpirun, errors outside on_every_rank are the same on every rank: rank 0 prints.
+        if (root_rank()) std::fprintf(stderr, "canopy: %s\n", error_text(std::current_exception()).c_str());
         return 1;
     }
 }
@@ -1171,5 +1424,12 @@ int main(int argc, char** argv) {
         std::fputs(main_usage, stderr);
         return 2;
     }
+#if CANOPY_WITH_MPI
+    if (dist::launched_by_mpirun()) {
+        dist::session mpi(argc, argv);
+        ranks = mpi.world();
+        return finish_standard_output(run(args[1], args.subspan(2)));
+    }
+#endif
     return finish_standard_output(run(args[1], args.subspan(2)));
 }

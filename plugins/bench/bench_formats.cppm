@@ -34,6 +34,7 @@ module;
 #include <fstream>
 #include <limits>
 #include <new>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -312,34 +313,70 @@ inline std::vector<ray> parse_bench_rays(std::string_view content, std::filesyst
     });
 }
 
-// A ray file, read in pieces straight into the rays (no second copy of the file in memory).
-inline std::vector<ray> read_bench_rays(std::filesystem::path const& file) {
+// The number of rays of a ray file (a regular file within the limit of bytes; its size a
+// multiple of 32).
+inline std::uint64_t count_bench_rays(std::filesystem::path const& file) {
     std::uint64_t const size = detail::checked(file, [&] { return require_regular_file(file, "ray file"); });
     if (size % 32 != 0)
         detail::fail(file, 0, "size " + std::to_string(size) + " bytes is not a multiple of 32 (one ray = 32 bytes)");
-    std::ifstream in(file, std::ios::binary);
-    if (!in) detail::fail(file, 0, std::string("cannot be opened: ") + std::strerror(errno));
+    return size / 32;
+}
+
+namespace detail {
+
+// Rays [first, first + count) of `in`, read in pieces straight into the rays (no second copy of
+// the file in memory); `size` is the file's, for messages.
+inline std::vector<ray> read_rays(std::ifstream& in, std::filesystem::path const& file, std::uint64_t first,
+                                  std::uint64_t count, std::uint64_t size) {
     std::vector<ray> rays;
     std::vector<char> piece;
-    detail::checked(file, [&] {
-        rays.resize(std::size_t(size / 32));
+    checked(file, [&] {
+        rays.resize(std::size_t(count));
         piece.resize(32 * 4096);
     });
-    for (std::size_t first = 0; first < rays.size();) {
-        std::size_t const count = std::min<std::size_t>(4096, rays.size() - first);
-        in.read(piece.data(), std::streamsize(32 * count));
-        if (in.bad() || std::size_t(in.gcount()) != 32 * count)
-            detail::fail(file, 0, "read error after " + std::to_string(32 * first + std::size_t(in.gcount())) + " of " +
-                                      std::to_string(size) + " bytes");
-        for (std::size_t i = 0; i < count; ++i) {
+    if (first > 0) in.seekg(std::streamoff(32 * first));
+    for (std::size_t done = 0; done < rays.size();) {
+        std::size_t const n = std::min<std::size_t>(4096, rays.size() - done);
+        in.read(piece.data(), std::streamsize(32 * n));
+        if (in.bad() || std::size_t(in.gcount()) != 32 * n)
+            fail(file, 0, "read error after " + std::to_string(32 * (first + done) + std::size_t(in.gcount())) + " of " +
+                              std::to_string(size) + " bytes");
+        for (std::size_t i = 0; i < n; ++i) {
             float f[8];
             std::memcpy(f, piece.data() + 32 * i, sizeof f);
-            rays[first + i] = ray{vec3<float>(f[0], f[1], f[2]), f[3], vec3<float>(f[4], f[5], f[6]), f[7]};
+            rays[done + i] = ray{vec3<float>(f[0], f[1], f[2]), f[3], vec3<float>(f[4], f[5], f[6]), f[7]};
         }
-        first += count;
+        done += n;
     }
+    return rays;
+}
+
+inline std::ifstream open_rays(std::filesystem::path const& file) {
+    std::ifstream in(file, std::ios::binary);
+    if (!in) fail(file, 0, std::string("cannot be opened: ") + std::strerror(errno));
+    return in;
+}
+
+} // namespace detail
+
+// A ray file, read in pieces straight into the rays (no second copy of the file in memory).
+inline std::vector<ray> read_bench_rays(std::filesystem::path const& file) {
+    std::uint64_t const count = count_bench_rays(file);
+    std::ifstream in = detail::open_rays(file);
+    std::vector<ray> rays = detail::read_rays(in, file, 0, count, 32 * count);
     if (in.peek() != std::ifstream::traits_type::eof()) detail::fail(file, 0, "grew while it was being read");
     return rays;
+}
+
+// Rays [first, first + count) of a ray file of `total` rays (count_bench_rays), read at their
+// offset: each process of a distributed trace reads only its own.
+inline std::vector<ray> read_bench_rays(std::filesystem::path const& file, std::uint64_t first, std::uint64_t count,
+                                        std::uint64_t total) {
+    if (first > total || count > total - first)
+        detail::fail(file, 0, "rays " + std::to_string(first) + " to " + std::to_string(first + count) +
+                                  " are beyond its " + std::to_string(total) + " rays");
+    std::ifstream in = detail::open_rays(file);
+    return detail::read_rays(in, file, first, count, 32 * total);
 }
 
 namespace detail {
@@ -359,7 +396,8 @@ inline void write_file(std::filesystem::path const& file, std::string const& byt
 
 } // namespace detail
 
-inline void write_bench_hits(std::filesystem::path const& file, std::vector<bench_hit> const& hits) {
+// The bytes of hits as a hit file holds them (20 per hit).
+inline std::string encode_bench_hits(std::span<bench_hit const> hits) {
     static_assert(std::endian::native == std::endian::little);
     std::string buffer(hits.size() * 20, '\0');
     for (std::size_t i = 0; i < hits.size(); ++i) {
@@ -370,7 +408,11 @@ inline void write_bench_hits(std::filesystem::path const& file, std::vector<benc
         std::memcpy(p + 12, &hits[i].u, 4);
         std::memcpy(p + 16, &hits[i].v, 4);
     }
-    detail::write_file(file, buffer);
+    return buffer;
+}
+
+inline void write_bench_hits(std::filesystem::path const& file, std::vector<bench_hit> const& hits) {
+    detail::write_file(file, encode_bench_hits(hits));
 }
 
 // Hits from the bytes of a hit file (`file` names it in errors).

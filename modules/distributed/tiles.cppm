@@ -1,0 +1,63 @@
+// canopy.distributed:tiles — canopy::render_tiles across the ranks of a job: the tiles of
+// canopy.render's tile_grid dealt out by the dealer, each rank shading its ranges with oneTBB
+// across its cores, the pixels gathered into rank 0's framebuffer. shade(x, y) must depend on
+// the pixel alone (the kernels of canopy.render do: their random streams are seeded by the
+// pixel and the sample), so the image is bit-identical to one process's, whatever the ranks.
+module;
+#include <cstddef>
+#include <cstring>
+#include <functional>
+#include <span>
+#include <stdexcept>
+#include <vector>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+export module canopy.distributed:tiles;
+import canopy.render;
+import :communicator;
+import :dealer;
+
+export namespace canopy::distributed {
+
+// Collective. On rank 0, fb (of the image's size) receives every pixel and options.progress the
+// fraction gathered; on the other ranks fb is left as it is. Pixels travel as float RGBA (16
+// bytes each), the tiles of a range one after the other.
+deal_report render_tiles(communicator const& comm, framebuffer& fb, std::function<vec4<float>(int, int)> const& shade,
+                         tile_options const& options = {}, deal_options dealing = {}) {
+    tile_grid const grid(fb.width, fb.height, options.tile_size);
+    std::size_t const tile_bytes = std::size_t(grid.tile) * std::size_t(grid.tile) * sizeof(vec4<float>);
+    auto const work = [&](item_range r) {
+        // Tile k of the range at k · tile_bytes (the last row and column of tiles leave a gap).
+        std::vector<std::byte> bytes(r.count * tile_bytes);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, r.count, 1), [&](auto const& tiles) {
+            for (std::size_t k = tiles.begin(); k != tiles.end(); ++k) {
+                tile_grid::rect const t = grid.bounds(int(r.first + k));
+                std::byte* out = bytes.data() + k * tile_bytes;
+                for (int y = t.y0; y < t.y1; ++y)
+                    for (int x = t.x0; x < t.x1; ++x) {
+                        vec4<float> const p = shade(x, y);
+                        std::memcpy(out, &p, sizeof p);
+                        out += sizeof p;
+                    }
+            }
+        });
+        return bytes;
+    };
+    auto const collect = [&](item_range r, std::span<std::byte const> bytes) {
+        if (bytes.size() != r.count * tile_bytes) throw std::runtime_error("a tile result of the wrong size");
+        for (std::size_t k = 0; k < r.count; ++k) {
+            tile_grid::rect const t = grid.bounds(int(r.first + k));
+            std::byte const* in = bytes.data() + k * tile_bytes;
+            for (int y = t.y0; y < t.y1; ++y)
+                for (int x = t.x0; x < t.x1; ++x) {
+                    std::memcpy(&fb.at(x, y), in, sizeof(vec4<float>));
+                    in += sizeof(vec4<float>);
+                }
+        }
+    };
+    if (options.progress && !dealing.progress)
+        dealing.progress = [&](std::size_t done, std::size_t total) { options.progress(float(done) / float(total)); };
+    return deal(comm, std::size_t(grid.count()), work, collect, dealing);
+}
+
+} // namespace canopy::distributed
