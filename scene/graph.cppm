@@ -39,15 +39,9 @@ namespace canopy {
 // to float once as the traversal does — that is not finite). Rays through such a transform would
 // miss silently. Shared by the graph's checks and compile()'s checks of composed placements.
 char const* transform_problem(affine_transform<float> const& xf) {
-    auto const finite = [](affine_transform<float> const& a) {
-        for (vec3<float> const v : {a.linear.col0, a.linear.col1, a.linear.col2, a.translation})
-            if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) return false;
-        return true;
-    };
-    if (!finite(xf)) return "transform has a value that is not finite";
-    double const det = determinant(mat3<double>{vec3<double>(xf.linear.col0), vec3<double>(xf.linear.col1),
-                                                vec3<double>(xf.linear.col2)});
-    if (!(std::abs(det) > 0.0) || !finite(inverse(xf))) return "transform is singular (it cannot be inverted)";
+    if (!all_finite(xf)) return "transform has a value that is not finite";
+    double const det = determinant(convert<double>(xf.linear));
+    if (!(std::abs(det) > 0.0) || !all_finite(inverse(xf))) return "transform is singular (it cannot be inverted)";
     return nullptr;
 }
 
