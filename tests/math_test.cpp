@@ -393,7 +393,7 @@ TEST_CASE("from_trs is T · R · S: the hand-computed matrix, and the product of
         CHECK(as_array(transform_point(trs, p)) == as_array(transform_point(composed, p)));
 }
 
-TEST_CASE("convert changes precision entry by entry; all_finite finds what narrowing overflows") {
+TEST_CASE("convert changes precision entry by entry, and all_finite finds what narrowing overflows") {
     auto const wide = affine_transform<double>::from_rows({0.1, 1, 0, 1e300, 0, 1, 0, 0, 0, 0, 1, -2.5});
     auto const narrow = canopy::convert<float>(wide);
     CHECK(narrow.linear.col0.x == 0.1f); // rounded once, to nearest

@@ -374,3 +374,20 @@ TEST_CASE("bench readers: counts grow within the limits, byte sizes of rays and 
     CHECK(message([&] { canopy::parse_bench_inst("mesh " + std::string(5000, 'm') + "\n", "i.inst"); }) ==
           "i.inst:1: mesh path of 5000 bytes is too long ('" + std::string(40, 'm') + "…')");
 }
+
+TEST_CASE("bench readers read text by canopy.scene:text's rules: hexadecimal refused, a byte-order mark skipped") {
+    auto const message = [](auto&& f) { return test_support::what_of<canopy::scene_error>(f); };
+    // strtod read "0x1p3" as 8; the formats' numbers are decimal.
+    CHECK(message([&] { canopy::parse_bench_obj("v 0 0 0\nv 0x1p3 0 0\nv 0 1 0\nf 1 2 3\n", "h.obj"); }) ==
+          "h.obj:2: bad number '0x1p3'");
+    CHECK(message([&] { canopy::parse_bench_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 2 3\n", "z.obj"); }) ==
+          "z.obj:4: vertex index 0 is not valid (OBJ indices start at 1)");
+    // A byte-order mark before the first `v` line: that line is a vertex like the others.
+    auto const mesh = canopy::parse_bench_obj("\xEF\xBB\xBFv 7 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "b.obj");
+    REQUIRE(mesh.triangles.size() == 1);
+    CHECK(mesh.triangles[0].v0.x == 7.0f);
+    // Numbers are read straight to the nearest float: just above the midpoint between 1 and the
+    // next float up (through double they would round to the midpoint, then to 1).
+    auto const rounded = canopy::parse_bench_obj("v 1.0000000596046448 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "r.obj");
+    CHECK(rounded.triangles[0].v0.x == 1.0f + 0x1p-23f);
+}
