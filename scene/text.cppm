@@ -313,11 +313,15 @@ inline obj_corner read_obj_corner(std::string_view token, obj_counts const& coun
 // rather than quoted whole in a "not found".
 inline constexpr std::size_t max_path_bytes = 4096;
 
-// Throws scene_error(file, line, "<what> of N bytes is too long ('…')") for a path over max_path_bytes.
-inline void check_path_length(std::string_view path, std::string const& file, std::size_t line, std::string_view what) {
+// Throws scene_error(file, where, "<what> of N bytes is too long ('…')") for a path over
+// max_path_bytes (`where`: a line number, or an element such as a JSON path).
+inline void check_path_length(std::string_view path, std::string const& file, std::string const& where, std::string_view what) {
     if (path.size() > max_path_bytes)
-        throw scene_error(file, line_where(line), std::string(what) + " of " + std::to_string(path.size()) +
-                                                      " bytes is too long (" + quoted(path) + ")");
+        throw scene_error(file, where, std::string(what) + " of " + std::to_string(path.size()) + " bytes is too long (" +
+                                           quoted(path) + ")");
+}
+inline void check_path_length(std::string_view path, std::string const& file, std::size_t line, std::string_view what) {
+    check_path_length(path, file, line_where(line), what);
 }
 
 } // namespace canopy

@@ -202,9 +202,9 @@ private:
     }
 
     // A file the scene names, relative to its folder; a name longer than any path can be
-    // (Linux's PATH_MAX) is refused by length rather than quoted whole.
+    // (canopy.scene:text's max_path_bytes) is refused by length rather than quoted whole.
     fs::path relative(std::string const& p, std::string const& path) const {
-        if (p.size() > 4096) fail(path, "file name of " + std::to_string(p.size()) + " bytes is too long ('" + excerpt(p) + "')");
+        check_path_length(p, file_, path, "file name");
         return folder_ / fs::path(p);
     }
 
