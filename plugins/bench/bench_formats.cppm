@@ -21,10 +21,9 @@
 // files that are not text (a NUL or other control byte, a UTF-16/32 byte-order mark: "not a text OBJ
 // file: NUL byte at offset 12"), faces with more or fewer than 3 vertices, bad or non-finite
 // numbers, numbers that overflow a float ("value 1e300 overflows a float"), zero or out-of-range
-// indices,
-// files with nothing to trace (a mesh without faces, an .inst without instance lines), an .inst
-// naming itself as its mesh, a ray file whose size is not a multiple of 32, unreadable files and
-// files over a limit. Input quoted in a message is cut to a short prefix.
+// indices, files with nothing to trace (a mesh without faces, an .inst without instance lines), an
+// .inst naming itself as its mesh, a ray file whose size is not a multiple of 32, unreadable files
+// and files over a limit. Input quoted in a message is cut to a short prefix.
 module;
 #include <algorithm>
 #include <array>
