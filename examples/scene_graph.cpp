@@ -17,11 +17,11 @@ int main(int argc, char** argv) {
 
         // A file loaded once, outside the tree (a prototype), placed twice by instance nodes.
         canopy::node_id const bunny = r.load(s, mesh_file, canopy::no_node);
-        using xf = canopy::affine_transform<float>;
-        s.add_instance(s.root(), bunny, xf::from_rows({20, 0, 0, 5, 0, 20, 0, -0.7f, 0, 0, 20, 6}), 7, "bunny 7");
-        s.add_instance(s.root(), bunny, xf::from_rows({0, 0, 20, -5, 0, 20, 0, -0.7f, -20, 0, 0, 6}), 8, "bunny 8");
+        using affine = canopy::affine_transform<float>;
+        s.add_instance(s.root(), bunny, affine::from_rows({20, 0, 0, 5, 0, 20, 0, -0.7f, 0, 0, 20, 6}), 7, "bunny 7");
+        s.add_instance(s.root(), bunny, affine::from_rows({0, 0, 20, -5, 0, 20, 0, -0.7f, -20, 0, 0, 6}), 8, "bunny 8");
         // Procedural content from a generator, under a transform.
-        canopy::node_id const up = s.add_transform(s.root(), xf::from_rows({1, 0, 0, 0, 0, 1, 0, 6, 0, 0, 1, 0}), "sky");
+        canopy::node_id const up = s.add_transform(s.root(), affine::from_rows({1, 0, 0, 0, 0, 1, 0, 6, 0, 0, 1, 0}), "sky");
         r.generate(s, "sphere", {{"subdivisions", "4"}, {"radius", "0.5"}}, up);
 
         canopy::compiled_scene const c = canopy::compile(s, {.plugins = &r, .name = scene_file});

@@ -504,13 +504,34 @@ constexpr affine_transform<T> operator*(affine_transform<T> const& a, affine_tra
     return {a.linear * b.linear, a.linear * b.translation + a.translation};
 }
 
+// Every entry finite, per lane.
+template <typename T> constexpr simd::mask_type_t<T> all_finite(affine_transform<T> const& a) {
+    return detail::mask_and(detail::mask_and(all_finite(a.linear.col0), all_finite(a.linear.col1)),
+                            detail::mask_and(all_finite(a.linear.col2), all_finite(a.translation)));
+}
+
+// The same matrix or map in precision U, each entry converted once (double → float rounds to
+// nearest; a value beyond the float range becomes infinite: check all_finite after narrowing).
+// Transforms are composed in double and rounded to float once (the scene loaders, compile()).
+template <std::floating_point U, std::floating_point T> constexpr mat3<U> convert(mat3<T> const& m) {
+    return {vec3<U>(m.col0), vec3<U>(m.col1), vec3<U>(m.col2)};
+}
+template <std::floating_point U, std::floating_point T>
+constexpr affine_transform<U> convert(affine_transform<T> const& a) {
+    return {convert<U>(a.linear), vec3<U>(a.translation)};
+}
+
+// T · R · S: scale along the axes by `scale`, then apply `rotation` (a rotation matrix, or any
+// linear map), then translate. The linear part is rotation's columns times the scale factors (one
+// product per entry, no sum), so it is exact in T up to that one rounding.
+template <typename T>
+constexpr affine_transform<T> from_trs(vec3<T> const& translation, mat3<T> const& rotation, vec3<T> const& scale) {
+    return {{rotation.col0 * scale.x, rotation.col1 * scale.y, rotation.col2 * scale.z}, translation};
+}
+
 } // namespace canopy
 
 namespace canopy::detail {
-
-template <typename U, typename T> constexpr mat3<U> convert(mat3<T> const& m) {
-    return {vec3<U>(m.col0), vec3<U>(m.col1), vec3<U>(m.col2)};
-}
 
 template <std::floating_point T>
 constexpr affine_transform<T> inverse_in_double(affine_transform<T> const& a) {

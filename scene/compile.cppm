@@ -91,26 +91,11 @@ namespace canopy {
 
 namespace {
 
+// Transforms composed in double (canopy.math's convert: widened exactly, rounded to float once).
 using xf64 = affine_transform<double>;
 
-xf64 widen(affine_transform<float> const& a) {
-    return {{vec3<double>(a.linear.col0), vec3<double>(a.linear.col1), vec3<double>(a.linear.col2)},
-            vec3<double>(a.translation)};
-}
-
-affine_transform<float> narrow(xf64 const& a) {
-    return {{vec3<float>(a.linear.col0), vec3<float>(a.linear.col1), vec3<float>(a.linear.col2)},
-            vec3<float>(a.translation)};
-}
-
-template <typename T> bool finite(vec3<T> v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
-
-bool finite(xf64 const& a) {
-    return finite(a.linear.col0) && finite(a.linear.col1) && finite(a.linear.col2) && finite(a.translation);
-}
-
 // A double value that stays finite once rounded to float.
-bool finite_in_float(vec3<double> v) { return finite(vec3<float>(v)); }
+bool finite_in_float(vec3<double> v) { return all_finite(vec3<float>(v)); }
 
 std::uint64_t saturating_add(std::uint64_t a, std::uint64_t b) {
     return a > std::numeric_limits<std::uint64_t>::max() - b ? std::numeric_limits<std::uint64_t>::max() : a + b;
@@ -133,15 +118,15 @@ struct frame {
 
     frame then(affine_transform<float> const& local) const {
         if (local.is_identity()) return *this;
-        if (identity) return {widen(local), false};
-        return {xf * widen(local), false};
+        if (identity) return {convert<double>(local), false};
+        return {xf * convert<double>(local), false};
     }
     frame then(frame const& inner) const {
         if (inner.identity) return *this;
         if (identity) return inner;
         return {xf * inner.xf, false};
     }
-    affine_transform<float> rounded() const { return identity ? affine_transform<float>::identity() : narrow(xf); }
+    affine_transform<float> rounded() const { return identity ? affine_transform<float>::identity() : convert<float>(xf); }
 };
 
 // Bounds in double (empty: lo > hi).
@@ -506,12 +491,12 @@ private:
     // outer ∘ inner, refused (naming `at`) when a value leaves double range.
     frame compose(frame const& outer, frame const& inner, node_id at) const {
         frame const f = outer.then(inner);
-        if (!f.identity && !finite(f.xf)) fail(at, "the transforms composed through it leave double range (a value is not finite)");
+        if (!f.identity && !all_finite(f.xf)) fail(at, "the transforms composed through it leave double range (a value is not finite)");
         return f;
     }
     frame compose(frame const& outer, affine_transform<float> const& local, node_id at) const {
         frame const f = outer.then(local);
-        if (!f.identity && !finite(f.xf)) fail(at, "the transforms composed through it leave double range (a value is not finite)");
+        if (!f.identity && !all_finite(f.xf)) fail(at, "the transforms composed through it leave double range (a value is not finite)");
         return f;
     }
 
@@ -632,7 +617,7 @@ private:
             if (char const* problem = transform_problem(p.transform))
                 throw scene_error(file_of(mesh), placement_label(mesh, placed_by, in),
                                   std::string("the transforms above it, composed and rounded to float: ") + problem);
-            bounds = mesh_bounds(source).mapped(widen(p.transform));
+            bounds = mesh_bounds(source).mapped(convert<double>(p.transform));
             if (!bounds.finite_in_float())
                 throw scene_error(file_of(mesh), placement_label(mesh, placed_by, in),
                                   "placed by the transforms above it, its bounds are not finite in float");
@@ -649,7 +634,7 @@ private:
         affine_transform<float> const xf = where.rounded();
         if (char const* problem = transform_problem(xf))
             fail(instance, std::string("the transforms above it, composed and rounded to float: ") + problem);
-        if (!bounds.mapped(widen(xf)).finite_in_float())
+        if (!bounds.mapped(convert<double>(xf)).finite_in_float())
             fail(instance, "placed by the transforms above it, the bounds of its subtree are not finite in float");
     }
 
@@ -666,7 +651,7 @@ private:
             c.target = vec3<float>(target);
             c.up = vec3<float>(up);
         }
-        if (!finite(c.eye) || !finite(c.target) || !finite(c.up)) fail(n, "the camera's eye, target or up is not finite");
+        if (!all_finite(c.eye) || !all_finite(c.target) || !all_finite(c.up)) fail(n, "the camera's eye, target or up is not finite");
         if (c.eye.x == c.target.x && c.eye.y == c.target.y && c.eye.z == c.target.z)
             fail(n, "placed by the transforms above it, the camera's eye and target coincide in float");
         camera_ = c;
@@ -685,7 +670,7 @@ private:
             l.position = vec3<float>(position);
             l.direction = vec3<float>(direction / length);
         }
-        if (!finite(l.position) || !finite(l.direction) || !finite(l.colour)) fail(n, "the light has a value that is not finite");
+        if (!all_finite(l.position) || !all_finite(l.direction) || !all_finite(l.colour)) fail(n, "the light has a value that is not finite");
         lights_.push_back(l);
     }
 

@@ -133,9 +133,9 @@ struct compiled_scene {
     vec3<float> sky_horizon{0.85f, 0.9f, 0.95f};
 
     // Places mesh `m` at the top level (levels becomes at least 1).
-    void place(std::uint32_t m, affine_transform<float> const& xf) {
+    void place(std::uint32_t m, affine_transform<float> const& object_to_world) {
         levels = std::max(levels, 1);
-        top_meshes.push_back({m, xf, invalid_id});
+        top_meshes.push_back({m, object_to_world, invalid_id});
     }
 
     // Builds every mesh BVH (each timed in compiled_mesh::build_seconds), then the groups, then

@@ -1,13 +1,15 @@
 // canopy.scene:error — the one exception type for bad scene input.
 //
-// Every loader, generator and compile step reports bad input by throwing scene_error. Its message
-// names the file, the place in it (line, element or node, where known) and the problem, as
+// Every loader, generator and compile step, the benchmark file readers (canopy.bench_formats) and
+// image I/O (canopy.image_io) report bad input by throwing scene_error; the library defines no
+// other exception type. Its message names the file, the place in it (line, element or node, where
+// known) and the problem, as
 //   "forest.json: node 'trees': instance target 'oak' does not exist"
-//   "bunny.obj:1207: face index 40112 is out of range (35947 vertices)"
+//   "bunny.obj:1207: vertex index 40112 is out of range (35947 vertices so far)"
 // so a user can find the fault without a debugger. A file name over 160 bytes is shown shortened
 // (its first 60 and last 99 bytes), so no message line grows with a hostile name. Nothing is
-// half-loaded: a loader that throws leaves the scene it was loading into as it was (see
-// scene::transaction).
+// half-loaded: registry::load rolls the scene back to where it was when a loader throws (see
+// scene::make_mark and scene::roll_back).
 module;
 #include <cstddef>
 #include <stdexcept>

@@ -39,15 +39,9 @@ namespace canopy {
 // to float once as the traversal does — that is not finite). Rays through such a transform would
 // miss silently. Shared by the graph's checks and compile()'s checks of composed placements.
 char const* transform_problem(affine_transform<float> const& xf) {
-    auto const finite = [](affine_transform<float> const& a) {
-        for (vec3<float> const v : {a.linear.col0, a.linear.col1, a.linear.col2, a.translation})
-            if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) return false;
-        return true;
-    };
-    if (!finite(xf)) return "transform has a value that is not finite";
-    double const det = determinant(mat3<double>{vec3<double>(xf.linear.col0), vec3<double>(xf.linear.col1),
-                                                vec3<double>(xf.linear.col2)});
-    if (!(std::abs(det) > 0.0) || !finite(inverse(xf))) return "transform is singular (it cannot be inverted)";
+    if (!all_finite(xf)) return "transform has a value that is not finite";
+    double const det = determinant(convert<double>(xf.linear));
+    if (!(std::abs(det) > 0.0) || !all_finite(inverse(xf))) return "transform is singular (it cannot be inverted)";
     return nullptr;
 }
 
@@ -180,7 +174,7 @@ struct node {
     node_kind kind = node_kind::group;
     std::string name;
     std::vector<node_id> children;                                                // group, transform, custom
-    affine_transform<float> transform = affine_transform<float>::identity();     // transform, instance
+    affine_transform<float> transform = affine_transform<float>::identity();     // transform, instance: object → parent
     std::uint32_t mesh = 0;                                                       // mesh
     node_id target = no_node;                                                     // instance
     std::uint32_t instance_id = 0;                                                // instance: the user's id
@@ -234,10 +228,10 @@ public:
     node_id add_group(node_id parent, std::string name = {}) {
         return add(parent, make(node_kind::group, std::move(name)));
     }
-    node_id add_transform(node_id parent, affine_transform<float> const& xf, std::string name = {}) {
-        check_transform(xf, name);
+    node_id add_transform(node_id parent, affine_transform<float> const& object_to_parent, std::string name = {}) {
+        check_transform(object_to_parent, name);
         node n = make(node_kind::transform, std::move(name));
-        n.transform = xf;
+        n.transform = object_to_parent;
         return add(parent, std::move(n));
     }
     node_id add_mesh_node(node_id parent, std::uint32_t mesh, std::string name = {}) {
@@ -247,13 +241,13 @@ public:
         n.mesh = mesh;
         return add(parent, std::move(n));
     }
-    node_id add_instance(node_id parent, node_id target, affine_transform<float> const& xf, std::uint32_t id,
+    node_id add_instance(node_id parent, node_id target, affine_transform<float> const& object_to_parent, std::uint32_t id,
                          std::string name = {}) {
         if (target >= nodes_.size())
             throw scene_error("", "node '" + name + "'", "instance target " + std::to_string(target) + " does not exist");
-        check_transform(xf, name);
+        check_transform(object_to_parent, name);
         node n = make(node_kind::instance, std::move(name));
-        n.transform = xf;
+        n.transform = object_to_parent;
         n.target = target;
         n.instance_id = id;
         return add(parent, std::move(n));
@@ -320,8 +314,8 @@ private:
 
     static bool all_finite(vec3<float> v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
-    static void check_transform(affine_transform<float> const& xf, std::string const& name) {
-        if (char const* problem = transform_problem(xf)) throw scene_error("", "node '" + name + "'", problem);
+    static void check_transform(affine_transform<float> const& object_to_parent, std::string const& name) {
+        if (char const* problem = transform_problem(object_to_parent)) throw scene_error("", "node '" + name + "'", problem);
     }
 
     void check_parent(node_id parent) const {

@@ -6,6 +6,7 @@
 //   c.closest_hit(ray, isect);                        // :compiled what queries and kernels trace
 //   triangulate_polygon(corners);                     // :polygon  loaders' faces of n > 3 corners
 //   default_limits().max_texels = 1 << 28;            // :limits   resource limits, checked file opening
+//   line_reader lines(text); parse_float(token, ...); // :text     loaders' lines, tokens, numbers, OBJ indices
 //
 // Built-in loaders and generators live in plugins/ (module canopy.plugins).
 export module canopy.scene;
@@ -16,3 +17,4 @@ export import :registry;
 export import :compiled;
 export import :compile;
 export import :polygon;
+export import :text;

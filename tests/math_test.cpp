@@ -369,6 +369,44 @@ TEST_CASE("composition a * b applies b first") {
           as_array(transform_point(translate, transform_point(scale, p))));
 }
 
+TEST_CASE("from_trs is T · R · S: the hand-computed matrix, and the product of the three maps") {
+    // A quarter turn about z (x → y, y → -x), scale (2, 3, 4), translation (5, 6, 7): row by row
+    //   [0 -3 0 | 5]
+    //   [2  0 0 | 6]
+    //   [0  0 4 | 7]
+    mat3<double> const quarter{{0, 1, 0}, {-1, 0, 0}, {0, 0, 1}};
+    auto const m = canopy::from_trs(vec3<double>{5, 6, 7}, quarter, vec3<double>{2, 3, 4});
+    auto const expected = affine_transform<double>::from_rows({0, -3, 0, 5, 2, 0, 0, 6, 0, 0, 4, 7});
+    CHECK(as_array(m.linear.col0) == as_array(expected.linear.col0));
+    CHECK(as_array(m.linear.col1) == as_array(expected.linear.col1));
+    CHECK(as_array(m.linear.col2) == as_array(expected.linear.col2));
+    CHECK(as_array(m.translation) == as_array(expected.translation));
+    CHECK(as_array(transform_point(m, vec3<double>{1, 1, 1})) == std::array{2.0, 8.0, 11.0});
+    // Any rotation: the same map as translate * rotate * scale composed as general products.
+    double const c = 0.6, s = 0.8; // a rotation about x with cos 0.6, sin 0.8
+    mat3<double> const about_x{{1, 0, 0}, {0, c, s}, {0, -s, c}};
+    auto const composed = affine_transform<double>{mat3<double>::identity(), {-1, 2, 0.5}} *
+                          affine_transform<double>{about_x, {}} *
+                          affine_transform<double>{{{0.5, 0, 0}, {0, 3, 0}, {0, 0, -2}}, {}};
+    auto const trs = canopy::from_trs(vec3<double>{-1, 2, 0.5}, about_x, vec3<double>{0.5, 3, -2});
+    for (vec3<double> const p : {vec3<double>{1, 2, 3}, vec3<double>{-4, 0.25, 8}})
+        CHECK(as_array(transform_point(trs, p)) == as_array(transform_point(composed, p)));
+}
+
+TEST_CASE("convert changes precision entry by entry, and all_finite finds what narrowing overflows") {
+    auto const wide = affine_transform<double>::from_rows({0.1, 1, 0, 1e300, 0, 1, 0, 0, 0, 0, 1, -2.5});
+    auto const narrow = canopy::convert<float>(wide);
+    CHECK(narrow.linear.col0.x == 0.1f); // rounded once, to nearest
+    CHECK(narrow.translation.z == -2.5f);
+    CHECK(std::isinf(narrow.translation.x));
+    CHECK(canopy::all_finite(wide));
+    CHECK(!canopy::all_finite(narrow));
+    auto const back = canopy::convert<double>(affine_transform<float>::from_rows({0.1f, 0, 0, 3, 0, 1, 0, 0, 0, 0, 1, 0}));
+    CHECK(back.linear.col0.x == double(0.1f)); // widened exactly
+    CHECK(back.translation.x == 3.0);
+    CHECK(as_array(canopy::convert<float>(mat3<double>::identity()).col1) == std::array{0.f, 1.f, 0.f});
+}
+
 TEST_CASE("affine inverse entries are within 1 ulp of the exact inverse") {
     // Over 10^5 random transforms of condition number <= 4, all 1.2 million entries measured equal
     // the correctly rounded exact inverse.

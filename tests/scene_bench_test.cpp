@@ -275,7 +275,7 @@ TEST_CASE("malformed bench files are scene errors naming the file at fault and t
              expectation{"two_meshes.inst", "two_meshes.inst", "2", "second 'mesh'"},
              expectation{"missing_mesh.inst", "nowhere.obj", "", "file not found (mesh of missing_mesh.inst)"},
              expectation{"bad_mesh.inst", "quad.obj", "5", "only triangles"},
-             expectation{"nan.inst", "nan.inst", "3", "non-finite"},
+             expectation{"nan.inst", "nan.inst", "3", "number 'nan' is not finite"},
              expectation{"singular.inst", "singular.inst", "2", "singular"},
              expectation{"no_instances.inst", "no_instances.inst", "", "no instance lines (12 numbers each): nothing to trace"},
              expectation{"absent.inst", "absent.inst", "", "not found"},
@@ -333,7 +333,7 @@ TEST_CASE("broken and odd OBJ files of assimp-testmodels: errors with lines, or 
 TEST_CASE("bench readers: counts grow within the limits, byte sizes of rays and hits are checked, messages stay short") {
     temp_folder const tmp("canopy_scene_bench_test");
     fs::path const& folder = tmp.path;
-    auto const message = [](auto&& f) { return test_support::what_of<canopy::format_error>(f); };
+    auto const message = [](auto&& f) { return test_support::what_of<canopy::scene_error>(f); };
     write(folder / "three.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 3\nf 1 2 3\n");
     write(folder / "two.inst", "mesh three.obj\n1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 5 0 1 0 0 0 0 1 0\n");
     auto const saved = canopy::default_limits();
@@ -368,9 +368,26 @@ TEST_CASE("bench readers: counts grow within the limits, byte sizes of rays and 
     // Numbers: 1e300 overflows a float, an over-long token is quoted by its prefix only.
     CHECK(message([&] { canopy::parse_bench_obj("v 0 1e300 0\n", "o.obj"); }) == "o.obj:1: value 1e300 overflows a float");
     CHECK(message([&] { canopy::parse_bench_obj("v 0 1e-300 0\nv 1 0 0\nv nan 0 0\n", "o.obj"); }) ==
-          "o.obj:3: non-finite number 'nan'");
+          "o.obj:3: number 'nan' is not finite");
     CHECK(message([&] { canopy::parse_bench_inst("mesh m.obj\n1 0 0 0 0 1 0 0 0 0 1 " + std::string(100000, '9') + "\n", "i.inst"); }) ==
           "i.inst:2: value " + std::string(40, '9') + "… overflows a float");
     CHECK(message([&] { canopy::parse_bench_inst("mesh " + std::string(5000, 'm') + "\n", "i.inst"); }) ==
           "i.inst:1: mesh path of 5000 bytes is too long ('" + std::string(40, 'm') + "…')");
+}
+
+TEST_CASE("bench readers read text by canopy.scene:text's rules: hexadecimal refused, a byte-order mark skipped") {
+    auto const message = [](auto&& f) { return test_support::what_of<canopy::scene_error>(f); };
+    // strtod read "0x1p3" as 8; the formats' numbers are decimal.
+    CHECK(message([&] { canopy::parse_bench_obj("v 0 0 0\nv 0x1p3 0 0\nv 0 1 0\nf 1 2 3\n", "h.obj"); }) ==
+          "h.obj:2: bad number '0x1p3'");
+    CHECK(message([&] { canopy::parse_bench_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 2 3\n", "z.obj"); }) ==
+          "z.obj:4: vertex index 0 is not valid (OBJ indices start at 1)");
+    // A byte-order mark before the first `v` line: that line is a vertex like the others.
+    auto const mesh = canopy::parse_bench_obj("\xEF\xBB\xBFv 7 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "b.obj");
+    REQUIRE(mesh.triangles.size() == 1);
+    CHECK(mesh.triangles[0].v0.x == 7.0f);
+    // Numbers are read straight to the nearest float: just above the midpoint between 1 and the
+    // next float up (through double they would round to the midpoint, then to 1).
+    auto const rounded = canopy::parse_bench_obj("v 1.0000000596046448 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "r.obj");
+    CHECK(rounded.triangles[0].v0.x == 1.0f + 0x1p-23f);
 }

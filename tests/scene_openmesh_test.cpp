@@ -996,3 +996,25 @@ TEST_CASE("a mesh file that is a device or a folder is refused before it is open
                       Catch::Contains("zero.ply: is a character device, not a regular file"));
     CHECK_THROWS_WITH(canopy::read_openmesh(tmp.path / "folder.off"), Catch::Contains("folder.off: is a folder, not a regular file"));
 }
+
+TEST_CASE("OBJ and PLY text is read by canopy.scene:text's rules, as the OBJ and benchmark readers read it") {
+    temp_folder const tmp("canopy_openmesh_test");
+    std::string const tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    // A byte-order mark would be read by OpenMesh as part of the first statement (dropping a vertex).
+    require_error(tmp.write("bom.obj", "\xEF\xBB\xBF" + tri + "f 1 2 3\n"),
+                  "bom.obj:1: the file begins with a UTF-8 byte-order mark, which OpenMesh's OBJ reader does not skip");
+    require_error(tmp.write("parts.obj", tri + "f 1/1/1/1 2 3\n"), "parts.obj:4: corner '1/1/1/1' has more than three parts");
+    require_error(tmp.write("zero.obj", tri + "f 0 2 3\n"), "zero.obj:4: vertex index 0 is not valid (OBJ indices start at 1)");
+    require_error(tmp.write("hex.obj", "v 0 0 0\nv 0x1 0 0\nv 0 1 0\nf 1 2 3\n"),
+                  "hex.obj:2: vertex coordinate '0x1' is not a number");
+    // An index beyond 64 bits is refused as such, not clamped.
+    require_error(tmp.write("big.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 99999999999999999999\n"),
+                  "big.off:6: face 0: vertex index '99999999999999999999' is beyond the 64-bit integer range");
+    // A value PLY reads and drops: a decimal number, an integer for an integer type.
+    std::string ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                      "property uchar quality\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                      "0 0 0 1\n1 0 0 2\n0 1 0 Q\n3 0 1 2\n";
+    require_error(tmp.write("quality.ply", ply), "quality.ply:13: vertex 2: quality = 'Q' is not an integer");
+    ply.replace(ply.find(" Q\n"), 3, " 3\n");
+    CHECK(canopy::read_openmesh(tmp.write("quality_ok.ply", ply)).mesh.triangles.size() == 1);
+}

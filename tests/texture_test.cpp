@@ -487,8 +487,6 @@ std::string problem_of(auto&& f) {
         f();
     } catch (canopy::scene_error const& e) {
         return e.what();
-    } catch (canopy::image_error const& e) {
-        return e.what();
     }
     FAIL_CHECK("no error");
     return {};

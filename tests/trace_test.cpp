@@ -1119,7 +1119,7 @@ TEST_CASE("the trace readers refuse what is not a scene or a ray file, naming th
     folder.write("long.obj", "v 0 0 " + std::string(1 << 20, '7') + "x\n");
 
     auto const p = [&](char const* name) { return (dir / name).string(); };
-    auto const message = [](auto&& read) { return test_support::what_of<canopy::format_error>(read); };
+    auto const message = [](auto&& read) { return test_support::what_of<canopy::scene_error>(read); };
     struct bad_file {
         char const* name;
         std::string message;

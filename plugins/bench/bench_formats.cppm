@@ -14,13 +14,16 @@
 // checked against canopy::default_limits() as they grow (vertices and triangles: max_triangles,
 // instances: max_placements).
 //
-// Errors (format_error) name the file, the line where there is one, and the problem: text files
-// that are not text (a NUL or other control byte, a UTF-16/32 byte-order mark: "not a text OBJ
+// Text is read by canopy.scene:text's rules (tokens, numbers, OBJ indices; a UTF-8 byte-order mark
+// is skipped).
+//
+// Errors (canopy::scene_error) name the file, the line where there is one, and the problem: text
+// files that are not text (a NUL or other control byte, a UTF-16/32 byte-order mark: "not a text OBJ
 // file: NUL byte at offset 12"), faces with more or fewer than 3 vertices, bad or non-finite
-// numbers, numbers that overflow a float ("value 1e300 overflows a float"), out-of-range indices,
-// files with nothing to trace (a mesh without faces, an .inst without instance lines), an .inst
-// naming itself as its mesh, a ray file whose size is not a multiple of 32, unreadable files and
-// files over a limit. Input quoted in a message is cut to a short prefix.
+// numbers, numbers that overflow a float ("value 1e300 overflows a float"), zero or out-of-range
+// indices, files with nothing to trace (a mesh without faces, an .inst without instance lines), an
+// .inst naming itself as its mesh, a ray file whose size is not a multiple of 32, unreadable files
+// and files over a limit. Input quoted in a message is cut to a short prefix.
 module;
 #include <algorithm>
 #include <array>
@@ -44,10 +47,6 @@ import canopy.intersector;
 import canopy.scene;
 
 export namespace canopy {
-
-struct format_error : std::runtime_error {
-    using std::runtime_error::runtime_error;
-};
 
 // A mesh of the OBJ subset: one triangle per `f` line, prim_id = its index.
 struct bench_mesh {
@@ -118,19 +117,14 @@ inline constexpr std::uint32_t occluded_unreported = 0xfffffffeu;
 namespace detail {
 
 [[noreturn]] inline void fail(std::filesystem::path const& file, std::size_t line, std::string const& what) {
-    std::string message = file.string();
-    if (line) message += ":" + std::to_string(line);
-    throw format_error(message + ": " + what);
+    throw scene_error(file.string(), line_where(line), what);
 }
 
-// Runs f; a scene_error (from canopy.scene's checks) becomes a format_error with its message, and
-// running out of memory one naming the file.
+// Runs f; running out of memory is an error naming the file.
 template <typename F>
 auto checked(std::filesystem::path const& file, F&& f) {
     try {
         return f();
-    } catch (scene_error const& e) {
-        throw format_error(e.what());
     } catch (std::bad_alloc const&) {
         fail(file, 0, "out of memory while reading");
     }
@@ -140,106 +134,39 @@ inline std::string read_file(std::filesystem::path const& file, std::string cons
     return checked(file, [&] { return read_regular_file(file, role); });
 }
 
-inline void limit(std::filesystem::path const& file, std::size_t line, std::uint64_t count, std::uint64_t max,
-                  char const* what, char const* option) {
-    checked(file, [&] { check_limit(file.string(), line ? std::to_string(line) : std::string(), count, max, what, option); });
-}
-
-inline bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
-
-// Splits s into whitespace-separated tokens.
-inline std::vector<std::string_view> tokens(std::string_view s) {
-    std::vector<std::string_view> out;
-    std::size_t i = 0;
-    while (i < s.size()) {
-        while (i < s.size() && is_space(s[i])) ++i;
-        std::size_t const start = i;
-        while (i < s.size() && !is_space(s[i])) ++i;
-        if (i > start) out.push_back(s.substr(start, i - start));
-    }
-    return out;
-}
-
-// A number of the file as a float: finite, and finite once rounded to float (1e300 is a finite
-// double but overflows a float).
-inline float parse_float(std::string_view token, std::filesystem::path const& file, std::size_t line) {
-    std::string const text(token);
-    char* end = nullptr;
-    errno = 0;
-    double const value = std::strtod(text.c_str(), &end);
-    bool const out_of_range = errno == ERANGE;
-    if (text.empty() || end != text.c_str() + text.size() || is_space(text.front()))
-        fail(file, line, "bad number '" + excerpt(token) + "'");
-    if (std::isnan(value) || (std::isinf(value) && !out_of_range))
-        fail(file, line, "non-finite number '" + excerpt(token) + "'");
-    float const rounded = float(value); // a value too small for a float rounds to (signed) zero
-    if (!std::isfinite(rounded)) fail(file, line, "value " + excerpt(token) + " overflows a float");
-    return rounded;
-}
-
-inline long parse_index(std::string_view token, std::filesystem::path const& file, std::size_t line) {
-    std::string const text(token.substr(0, token.find('/')));
-    char* end = nullptr;
-    errno = 0;
-    long const value = std::strtol(text.c_str(), &end, 10);
-    if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || is_space(text.front()))
-        fail(file, line, "bad vertex index '" + excerpt(token) + "'");
-    return value;
-}
-
-template <typename F>
-void for_each_line(std::string_view content, F&& f) {
-    std::size_t line = 0, pos = 0;
-    while (pos <= content.size()) {
-        std::size_t const end = std::min(content.find('\n', pos), content.size());
-        ++line;
-        std::string_view text(content.data() + pos, end - pos);
-        if (auto const hash = text.find('#'); hash != std::string_view::npos) text = text.substr(0, hash);
-        f(line, text);
-        if (end == content.size()) break;
-        pos = end + 1;
-    }
-}
-
-// Paths longer than this cannot name a file (Linux's PATH_MAX); longer ones are refused by length
-// rather than quoted whole in a "not found".
-inline constexpr std::size_t max_path_bytes = 4096;
-
 } // namespace detail
 
 // The OBJ subset from text (no file is read; `file` names it in errors, also for fuzzing).
 inline bench_mesh parse_bench_obj(std::string_view content, std::filesystem::path const& file) {
-    detail::checked(file, [&] { require_text(content, file.string(), "OBJ"); });
+    std::string const name = file.string();
+    require_text(content, name, "OBJ");
     std::uint64_t const max_triangles = default_limits().max_triangles;
     std::vector<vec3<float>> vertices;
     bench_mesh mesh;
     std::vector<std::string_view> tok;
-    detail::for_each_line(content, [&](std::size_t line, std::string_view text) {
-        tok = detail::tokens(text);
-        if (tok.empty()) return;
+    line_reader lines(skip_utf8_bom(content));
+    while (lines.next(tok)) {
+        std::size_t const line = lines.number();
         if (tok[0] == "v") {
             if (tok.size() < 4) detail::fail(file, line, "vertex needs 3 coordinates");
-            detail::limit(file, line, vertices.size() + 1, max_triangles, "vertices", "--max-triangles");
-            vertices.emplace_back(detail::parse_float(tok[1], file, line), detail::parse_float(tok[2], file, line),
-                                  detail::parse_float(tok[3], file, line));
+            check_limit(name, lines.where(), vertices.size() + 1, max_triangles, "vertices", "--max-triangles");
+            vertices.emplace_back(parse_float(tok[1], name, line), parse_float(tok[2], name, line),
+                                  parse_float(tok[3], name, line));
         } else if (tok[0] == "f") {
             if (tok.size() != 4)
                 detail::fail(file, line, "face has " + std::to_string(tok.size() - 1) + " vertices; only triangles are supported");
-            detail::limit(file, line, mesh.triangles.size() + 1, max_triangles, "triangles", "--max-triangles");
+            check_limit(name, lines.where(), mesh.triangles.size() + 1, max_triangles, "triangles", "--max-triangles");
             std::array<vec3<float>, 3> v;
-            for (int k = 0; k < 3; ++k) {
-                long const index = detail::parse_index(tok[std::size_t(k + 1)], file, line);
-                long const n = long(vertices.size());
-                long const resolved = index > 0 ? index - 1 : n + index;
-                if (index == 0 || resolved < 0 || resolved >= n)
-                    detail::fail(file, line, "vertex index " + std::to_string(index) + " out of range (" +
-                                                 std::to_string(n) + " vertices so far)");
-                v[std::size_t(k)] = vertices[std::size_t(resolved)];
+            for (std::size_t k = 0; k < 3; ++k) {
+                // Only the vertex index of a corner counts (the subset has no texture coordinates or normals).
+                std::string_view const corner = tok[k + 1];
+                v[k] = vertices[resolve_obj_index(corner.substr(0, corner.find('/')), corner, vertices.size(), "vertex",
+                                                  "vertices", name, line)];
             }
             auto const id = std::uint32_t(mesh.triangles.size());
             mesh.triangles.push_back(triangle{v[0], v[1], v[2], id, 0});
         }
-    });
+    }
     if (mesh.triangles.empty())
         detail::fail(file, 0, vertices.empty() ? "no faces ('f' lines) and no vertices: nothing to trace"
                                                : "no faces ('f' lines): nothing to trace");
@@ -254,33 +181,32 @@ inline bench_mesh read_bench_obj(std::filesystem::path const& file) {
 // An .inst from text: its instances and its mesh's path (resolved against `file`'s folder); the
 // mesh is not read (mesh stays empty). Also for fuzzing.
 inline bench_instanced_scene parse_bench_inst(std::string_view content, std::filesystem::path const& file) {
-    detail::checked(file, [&] { require_text(content, file.string(), ".inst"); });
+    std::string const name = file.string();
+    require_text(content, name, ".inst");
     std::uint64_t const max_instances = default_limits().max_placements;
     bench_instanced_scene out;
     std::vector<std::string_view> tok;
-    detail::for_each_line(content, [&](std::size_t line, std::string_view text) {
-        tok = detail::tokens(text);
-        if (tok.empty()) return;
+    line_reader lines(skip_utf8_bom(content));
+    while (lines.next(tok)) {
+        std::size_t const line = lines.number();
         if (tok[0] == "mesh") {
             if (tok.size() != 2) detail::fail(file, line, "expected 'mesh PATH'");
             if (!out.mesh_path.empty()) detail::fail(file, line, "a second 'mesh' line (one shared mesh only)");
-            if (tok[1].size() > detail::max_path_bytes)
-                detail::fail(file, line, "mesh path of " + std::to_string(tok[1].size()) + " bytes is too long ('" +
-                                             excerpt(tok[1]) + "')");
+            check_path_length(tok[1], name, line, "mesh path");
             std::filesystem::path p(tok[1]);
             out.mesh_path = p.is_absolute() ? p : file.parent_path() / p;
-            return;
+            continue;
         }
         if (tok.size() != 12)
             detail::fail(file, line, "instance line needs 12 numbers (3x4 row-major matrix), found " +
                                          std::to_string(tok.size()));
-        detail::limit(file, line, out.instances.size() + 1, max_instances, "instances", "--max-placements");
+        check_limit(name, lines.where(), out.instances.size() + 1, max_instances, "instances", "--max-placements");
         std::array<float, 12> rows;
-        for (std::size_t k = 0; k < 12; ++k) rows[k] = detail::parse_float(tok[k], file, line);
+        for (std::size_t k = 0; k < 12; ++k) rows[k] = parse_float(tok[k], name, line);
         auto const m = affine_transform<float>::from_rows(rows);
         if (determinant(m.linear) == 0.0f) detail::fail(file, line, "singular instance transform");
         out.instances.push_back(m);
-    });
+    }
     if (out.mesh_path.empty()) detail::fail(file, 0, "no 'mesh' line");
     if (out.instances.empty()) detail::fail(file, 0, "no instance lines (12 numbers each): nothing to trace");
     return out;
@@ -316,7 +242,7 @@ inline std::vector<ray> parse_bench_rays(std::string_view content, std::filesyst
 // The number of rays of a ray file (a regular file within the limit of bytes; its size a
 // multiple of 32).
 inline std::uint64_t count_bench_rays(std::filesystem::path const& file) {
-    std::uint64_t const size = detail::checked(file, [&] { return require_regular_file(file, "ray file"); });
+    std::uint64_t const size = require_regular_file(file, "ray file");
     if (size % 32 != 0)
         detail::fail(file, 0, "size " + std::to_string(size) + " bytes is not a multiple of 32 (one ray = 32 bytes)");
     return size / 32;

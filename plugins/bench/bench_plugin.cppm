@@ -13,14 +13,13 @@
 //          triangular `f` lines only; triangle i is the i-th `f` line (its prim_id).
 // Vertices are not shared between triangles (three per triangle, as the subset reader returns
 // them). Each file becomes a group named after it. Parameters: none.
-// Errors: whatever the format reader reports (files that are not text, faces that are not
-// triangles, bad or non-finite numbers, numbers that overflow a float, out-of-range indices, a
-// missing or second `mesh` line, an .inst naming itself as its mesh, singular transforms, files
-// that hold nothing to trace: a mesh without `f` lines, an .inst without instance lines;
-// unreadable files, files over a limit), as scene_error naming the file at fault (the .inst or its
-// mesh) and the line.
+// Errors: the format reader's scene_errors, passed on as they are, naming the file at fault (the
+// .inst or its mesh) and the line: files that are not text, faces that are not triangles, bad or
+// non-finite numbers, numbers that overflow a float, zero or out-of-range indices, a missing or
+// second `mesh` line, an .inst naming itself as its mesh, singular transforms, files that hold
+// nothing to trace (a mesh without `f` lines, an .inst without instance lines), unreadable files,
+// files over a limit.
 module;
-#include <cctype>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -38,25 +37,6 @@ void register_bench_plugin(registry& r);
 namespace canopy {
 
 namespace {
-
-// format_error's message is "FILE[:LINE]: PROBLEM"; scene_error keeps the three apart.
-[[noreturn]] void rethrow(format_error const& e, std::filesystem::path const& file) {
-    std::string const message = e.what();
-    std::size_t const colon = message.find(": ");
-    if (colon == std::string::npos) throw scene_error(file.string(), "", message);
-    std::string head = message.substr(0, colon);
-    std::string line;
-    if (std::size_t const last = head.rfind(':'); last != std::string::npos && last + 1 < head.size()) {
-        std::string const tail = head.substr(last + 1);
-        bool digits = true;
-        for (char c : tail) digits &= std::isdigit(static_cast<unsigned char>(c)) != 0;
-        if (digits) {
-            line = tail;
-            head.resize(last);
-        }
-    }
-    throw scene_error(head.empty() ? file.string() : head, line, message.substr(colon + 2));
-}
 
 mesh_data to_mesh(bench_mesh const& in, std::filesystem::path const& file) {
     if (in.triangles.size() > (std::size_t(1) << 32) / 3 - 1)
@@ -76,12 +56,7 @@ mesh_data to_mesh(bench_mesh const& in, std::filesystem::path const& file) {
 }
 
 node_id load_inst(scene& s, std::filesystem::path const& file, node_id parent, registry const&) {
-    bench_instanced_scene in;
-    try {
-        in = read_bench_inst(file);
-    } catch (format_error const& e) {
-        rethrow(e, file);
-    }
+    bench_instanced_scene const in = read_bench_inst(file);
     std::uint32_t const mesh = s.add_mesh(to_mesh(in.mesh, in.mesh_path));
     node_id const prototype = s.add_mesh_node(no_node, mesh, in.mesh_path.filename().string());
     s.at(prototype).source = file.string();
@@ -95,12 +70,7 @@ node_id load_inst(scene& s, std::filesystem::path const& file, node_id parent, r
 }
 
 node_id load_obj(scene& s, std::filesystem::path const& file, node_id parent, registry const&) {
-    bench_mesh in;
-    try {
-        in = read_bench_obj(file);
-    } catch (format_error const& e) {
-        rethrow(e, file);
-    }
+    bench_mesh const in = read_bench_obj(file);
     std::uint32_t const mesh = s.add_mesh(to_mesh(in, file));
     node_id const group = s.add_group(parent, file.filename().string());
     s.at(group).source = file.string();

@@ -399,32 +399,28 @@ private:
             check(n.translation, 3, "translation");
             check(n.rotation, 4, "rotation");
             check(n.scale, 3, "scale");
-            // T · R · S, in that order (glTF 2.0, §3.5.3).
-            mat3<double> linear = mat3<double>::identity();
+            // T · R · S, in that order (glTF 2.0, §3.5.3): canopy.math's from_trs, in double.
+            mat3<double> rotation = mat3<double>::identity();
             if (!n.rotation.empty()) {
                 double x = n.rotation[0], y = n.rotation[1], z = n.rotation[2], w = n.rotation[3];
                 double const norm = std::sqrt(x * x + y * y + z * z + w * w);
                 if (!(norm > 0.0)) fail(where, "rotation is not a unit quaternion (its length is 0)");
                 x /= norm, y /= norm, z /= norm, w /= norm;
-                linear = mat3<double>{vec3<double>(1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)),
+                rotation = mat3<double>{vec3<double>(1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)),
                                       vec3<double>(2 * (x * y - z * w), 1 - 2 * (x * x + z * z), 2 * (y * z + x * w)),
                                       vec3<double>(2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y))};
             }
+            vec3<double> scale{1.0}, translation{0.0};
             if (!n.scale.empty()) {
                 if (n.scale[0] == 0.0 || n.scale[1] == 0.0 || n.scale[2] == 0.0)
                     fail(where, "scale has a zero component: canopy places geometry only with invertible transforms");
-                linear.col0 = linear.col0 * n.scale[0];
-                linear.col1 = linear.col1 * n.scale[1];
-                linear.col2 = linear.col2 * n.scale[2];
+                scale = vec3<double>(n.scale[0], n.scale[1], n.scale[2]);
             }
-            xf.linear = linear;
-            if (!n.translation.empty()) xf.translation = vec3<double>(n.translation[0], n.translation[1], n.translation[2]);
+            if (!n.translation.empty()) translation = vec3<double>(n.translation[0], n.translation[1], n.translation[2]);
+            xf = from_trs(translation, rotation, scale);
         }
-        affine_transform<float> const out{{vec3<float>(xf.linear.col0), vec3<float>(xf.linear.col1), vec3<float>(xf.linear.col2)},
-                                          vec3<float>(xf.translation)};
-        for (auto const& v : {out.linear.col0, out.linear.col1, out.linear.col2, out.translation})
-            if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
-                fail(where, "transform has a value beyond the range of a float");
+        affine_transform<float> const out = convert<float>(xf);
+        if (!canopy::all_finite(out)) fail(where, "transform has a value beyond the range of a float");
         return out;
     }
 

@@ -48,30 +48,6 @@ std::string type_name(json const& j) {
 std::string at_index(std::string const& path, std::size_t i) { return path + "[" + std::to_string(i) + "]"; }
 std::string at_key(std::string const& path, std::string const& key) { return path.empty() ? key : path + "." + key; }
 
-// Affine map in double: rows of a 3×4 matrix.
-using rows34 = std::array<std::array<double, 4>, 3>;
-
-rows34 multiply(rows34 const& a, rows34 const& b) {
-    rows34 out{};
-    for (std::size_t i = 0; i < 3; ++i) {
-        for (std::size_t j = 0; j < 4; ++j) {
-            double v = j == 3 ? a[i][3] : 0.0;
-            for (std::size_t k = 0; k < 3; ++k) v += a[i][k] * b[k][j];
-            out[i][j] = v;
-        }
-    }
-    return out;
-}
-
-constexpr rows34 identity_rows{{{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}}};
-
-affine_transform<float> to_affine(rows34 const& m) {
-    std::array<float, 12> r{};
-    for (std::size_t i = 0; i < 3; ++i)
-        for (std::size_t j = 0; j < 4; ++j) r[4 * i + j] = float(m[i][j]);
-    return affine_transform<float>::from_rows(r);
-}
-
 // Files being loaded by this plugin on this thread (a scene referring to itself is refused).
 thread_local std::vector<std::string> files_in_progress;
 
@@ -226,9 +202,9 @@ private:
     }
 
     // A file the scene names, relative to its folder; a name longer than any path can be
-    // (Linux's PATH_MAX) is refused by length rather than quoted whole.
+    // (canopy.scene:text's max_path_bytes) is refused by length rather than quoted whole.
     fs::path relative(std::string const& p, std::string const& path) const {
-        if (p.size() > 4096) fail(path, "file name of " + std::to_string(p.size()) + " bytes is too long ('" + excerpt(p) + "')");
+        check_path_length(p, file_, path, "file name");
         return folder_ / fs::path(p);
     }
 
@@ -355,17 +331,14 @@ private:
         if (json const* m = optional(e, "matrix", path)) {
             if (trs) fail(at_key(path, "matrix"), "cannot be combined with translate, rotate or scale");
             auto const v = numbers(*m, at_key(path, "matrix"), 12);
-            rows34 rows{};
-            for (std::size_t i = 0; i < 12; ++i) rows[i / 4][i % 4] = v[i];
-            return to_affine(rows);
+            std::array<float, 12> rows{};
+            std::copy(v.begin(), v.end(), rows.begin());
+            return affine_transform<float>::from_rows(rows);
         }
-        rows34 t = identity_rows, r = identity_rows, s = identity_rows;
-        if (json const* j = optional(e, "translate", path)) {
-            auto const v = vec(*j, at_key(path, "translate"));
-            t[0][3] = v.x;
-            t[1][3] = v.y;
-            t[2][3] = v.z;
-        }
+        // Composed in double, rounded to float once (canopy.math's from_trs and convert).
+        vec3<double> t{0.0}, s{1.0};
+        mat3<double> r = mat3<double>::identity();
+        if (json const* j = optional(e, "translate", path)) t = vec3<double>(vec(*j, at_key(path, "translate")));
         if (json const* j = optional(e, "rotate", path)) {
             std::string const p = at_key(path, "rotate");
             auto const v = numbers(*j, p, 4);
@@ -378,9 +351,9 @@ private:
             z /= length;
             // Rodrigues: R = cos θ I + sin θ [k]× + (1 − cos θ) k kᵀ.
             double const c = std::cos(angle), sn = std::sin(angle), cc = 1.0 - c;
-            r = {{{c + x * x * cc, x * y * cc - z * sn, x * z * cc + y * sn, 0},
-                  {y * x * cc + z * sn, c + y * y * cc, y * z * cc - x * sn, 0},
-                  {z * x * cc - y * sn, z * y * cc + x * sn, c + z * z * cc, 0}}};
+            r = {{c + x * x * cc, y * x * cc + z * sn, z * x * cc - y * sn}, // columns
+                 {x * y * cc - z * sn, c + y * y * cc, z * y * cc + x * sn},
+                 {x * z * cc + y * sn, y * z * cc - x * sn, c + z * z * cc}};
         }
         if (json const* j = optional(e, "scale", path)) {
             std::string const p = at_key(path, "scale");
@@ -391,11 +364,9 @@ private:
             } else {
                 v = vec(*j, p);
             }
-            s[0][0] = v.x;
-            s[1][1] = v.y;
-            s[2][2] = v.z;
+            s = vec3<double>(v);
         }
-        return to_affine(multiply(t, multiply(r, s)));
+        return convert<float>(from_trs(t, r, s));
     }
 
     void children(json const& e, std::string const& path, node_id parent, int depth) {

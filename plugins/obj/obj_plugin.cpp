@@ -31,15 +31,7 @@ namespace fs = std::filesystem;
 constexpr std::uint32_t absent = ~std::uint32_t(0);
 
 [[noreturn]] void fail(std::string const& file, std::size_t line, std::string const& problem) {
-    throw scene_error(file, line ? std::to_string(line) : std::string(), problem);
-}
-
-bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
-
-std::string_view trim(std::string_view s) {
-    while (!s.empty() && is_space(s.front())) s.remove_prefix(1);
-    while (!s.empty() && is_space(s.back())) s.remove_suffix(1);
-    return s;
+    throw scene_error(file, line_where(line), problem);
 }
 
 bool equals_ignoring_case(std::string_view a, std::string_view b) {
@@ -48,62 +40,11 @@ bool equals_ignoring_case(std::string_view a, std::string_view b) {
            });
 }
 
-// Splits a line into whitespace-separated tokens (views into the line).
-void split(std::string_view line, std::vector<std::string_view>& out) {
-    out.clear();
-    std::size_t i = 0;
-    while (i < line.size()) {
-        while (i < line.size() && is_space(line[i])) ++i;
-        std::size_t const start = i;
-        while (i < line.size() && !is_space(line[i])) ++i;
-        if (i > start) out.push_back(line.substr(start, i - start));
-    }
-}
-
-// The text after a token, trimmed (names and paths may hold spaces).
-std::string_view rest_after(std::string_view line, std::string_view token) {
-    return trim(line.substr(std::size_t(token.data() + token.size() - line.data())));
-}
-
-std::string_view rest_from(std::string_view line, std::string_view token) {
-    return trim(line.substr(std::size_t(token.data() - line.data())));
-}
-
-// Calls f(line number, line without its comment) for each line; refuses what is not text
-// (canopy.scene's require_text: "not a text OBJ file: NUL byte at offset 12", a UTF-16 byte-order
-// mark). `format` is "OBJ" or "MTL".
-template <typename F>
-void for_each_line(std::string_view text, std::string const& file, char const* format, F&& f) {
+// The lines of an OBJ or MTL text (`format`), after require_text (canopy.scene:limits: "not a text
+// OBJ file: NUL byte at offset 12", a UTF-16 byte-order mark) and without a UTF-8 byte-order mark.
+line_reader text_lines(std::string_view text, std::string const& file, char const* format) {
     require_text(text, file, format);
-    if (text.starts_with("\xEF\xBB\xBF")) text.remove_prefix(3);
-    std::size_t line = 0, pos = 0;
-    while (pos < text.size()) {
-        std::size_t const end = std::min(text.find('\n', pos), text.size());
-        ++line;
-        std::string_view content = text.substr(pos, end - pos);
-        if (auto const hash = content.find('#'); hash != std::string_view::npos) content = content.substr(0, hash);
-        f(line, content);
-        pos = end + 1;
-    }
-}
-
-// A number as a float: finite, and finite once rounded to float (1e300 is a finite double but
-// overflows a float). A number too small for a float rounds to (signed) zero.
-float parse_float(std::string_view token, std::string const& file, std::size_t line) {
-    std::string_view t = token;
-    if (t.size() > 1 && t[0] == '+' && t[1] != '+' && t[1] != '-') t.remove_prefix(1);
-    double value = 0.0;
-    auto const [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
-    if ((ec != std::errc{} && ec != std::errc::result_out_of_range) || end != t.data() + t.size())
-        fail(file, line, "bad number '" + excerpt(token) + "'");
-    if (ec == std::errc::result_out_of_range) { // beyond double: too large, or too small (→ 0)
-        value = std::strtod(std::string(t).c_str(), nullptr);
-        if (std::isinf(value)) fail(file, line, "value " + excerpt(token) + " overflows a float");
-    }
-    if (!std::isfinite(value)) fail(file, line, "number '" + excerpt(token) + "' is not finite");
-    float const rounded = float(value);
-    if (!std::isfinite(rounded)) fail(file, line, "value " + excerpt(token) + " overflows a float");
-    return rounded;
+    return line_reader(skip_utf8_bom(text));
 }
 
 // Reads `count_min`..`count_max` numbers from tokens[1..].
@@ -115,24 +56,6 @@ std::size_t parse_floats(std::vector<std::string_view> const& tokens, std::size_
         fail(file, line, "'" + excerpt(tokens[0]) + "' needs " + expected + ", found " + std::to_string(n) + " values");
     for (std::size_t k = 0; k < n; ++k) out[k] = parse_float(tokens[k + 1], file, line);
     return n;
-}
-
-// A 1-based (or negative, relative) OBJ index resolved against `count` elements so far.
-std::uint32_t resolve_index(std::string_view token, std::string_view whole, std::size_t count, char const* what,
-                            char const* plural, std::string const& file, std::size_t line) {
-    std::string_view t = token;
-    if (t.size() > 1 && t[0] == '+' && t[1] != '-') t.remove_prefix(1);
-    std::int64_t value = 0;
-    auto const [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
-    if (t.empty() || ec != std::errc{} || end != t.data() + t.size())
-        fail(file, line, std::string("bad ") + what + " index '" + excerpt(token) + "' in corner '" + excerpt(whole) + "'");
-    if (value == 0) fail(file, line, std::string(what) + " index 0 is not valid (OBJ indices start at 1)");
-    auto const n = std::int64_t(count);
-    std::int64_t const resolved = value > 0 ? value - 1 : n + value;
-    if (resolved < 0 || resolved >= n)
-        fail(file, line, std::string(what) + " index " + std::to_string(value) + " is out of range (" + std::to_string(count) +
-                             " " + plural + " so far)");
-    return std::uint32_t(resolved);
 }
 
 struct corner {
@@ -147,15 +70,6 @@ struct bucket {
     std::size_t fanned_faces = 0; // triangulate_polygon's fallback: fanned, may cover more than the face
     std::size_t first_fanned_line = 0;
 };
-
-// Paths longer than this cannot name a file (Linux's PATH_MAX): refused by length, not quoted whole.
-constexpr std::size_t max_path_bytes = 4096;
-
-void check_path_length(std::string_view path, std::string const& file, std::size_t line, char const* what) {
-    if (path.size() > max_path_bytes)
-        fail(file, line, std::string(what) + " name of " + std::to_string(path.size()) + " bytes is too long ('" +
-                             excerpt(path) + "')");
-}
 
 // A texture statement's file, after its options. Options that change the lookup are refused.
 std::string texture_path(std::string_view line, std::vector<std::string_view> const& tokens, std::string const& file,
@@ -180,7 +94,7 @@ std::string texture_path(std::string_view line, std::vector<std::string_view> co
     }
     if (k >= tokens.size()) fail(file, line_number, "'" + excerpt(tokens[0]) + "' needs a file name");
     std::string path(rest_from(line, tokens[k]));
-    check_path_length(path, file, line_number, "texture file");
+    check_path_length(path, file, line_number, "texture file name");
     std::replace(path.begin(), path.end(), '\\', '/');
     return path;
 }
@@ -246,9 +160,10 @@ public:
         std::vector<std::string_view> tokens;
         std::vector<corner> face;
         bool any_statement = false, points_or_lines = false; // of OBJ's geometry and grouping statements
-        for_each_line(text, file_, "OBJ", [&](std::size_t line, std::string_view content) {
-            split(content, tokens);
-            if (tokens.empty()) return;
+        line_reader lines = text_lines(text, file_, "OBJ");
+        while (lines.next(tokens)) {
+            std::size_t const line = lines.number();
+            std::string_view const content = lines.line();
             std::string_view const op = tokens[0];
             if (op == "v") {
                 std::array<float, 7> c{};
@@ -274,10 +189,10 @@ public:
             } else if (op == "l" || op == "p") {
                 points_or_lines = true;
             } else if (!(op == "o" || op == "g" || op == "s" || op == "vp")) {
-                return;
+                continue;
             }
             any_statement = true;
-        });
+        }
         if (triangles_ == 0)
             fail(file_, 0, text.find_first_not_of(" \t\r\n\v\f") == std::string_view::npos ? "is empty: nothing to trace"
                            : !any_statement   ? "not an OBJ file: no OBJ statement (v, f, ...) in it, nothing to trace"
@@ -305,21 +220,12 @@ private:
         face.clear();
         for (std::size_t k = 1; k < tokens.size(); ++k) {
             std::string_view const token = tokens[k];
-            std::size_t const slash1 = token.find('/');
-            std::size_t const slash2 = slash1 == std::string_view::npos ? slash1 : token.find('/', slash1 + 1);
-            if (slash2 != std::string_view::npos && token.find('/', slash2 + 1) != std::string_view::npos)
-                fail(file_, line, "corner '" + excerpt(token) + "' has more than three parts");
+            obj_corner const read = read_obj_corner(token, {positions_.size(), uvs_.size(), normals_.size()}, file_, line);
+            // Each count is below max_elements_ < 2^32 - 1 (grow), so every index fits 32 bits.
             corner c;
-            c.v = resolve_index(token.substr(0, slash1), token, positions_.size(), "vertex", "vertices", file_, line);
-            if (slash1 != std::string_view::npos) {
-                std::string_view const vt = token.substr(slash1 + 1, slash2 == std::string_view::npos ? std::string_view::npos
-                                                                                                      : slash2 - slash1 - 1);
-                if (!vt.empty()) c.vt = resolve_index(vt, token, uvs_.size(), "texture coordinate", "texture coordinates", file_, line);
-                else if (slash2 == std::string_view::npos)
-                    fail(file_, line, "corner '" + excerpt(token) + "' has an empty texture coordinate index");
-                if (slash2 != std::string_view::npos)
-                    c.vn = resolve_index(token.substr(slash2 + 1), token, normals_.size(), "normal", "normals", file_, line);
-            }
+            c.v = std::uint32_t(read.v);
+            if (read.vt) c.vt = std::uint32_t(*read.vt);
+            if (read.vn) c.vn = std::uint32_t(*read.vn);
             if (!face.empty() && ((c.vt == absent) != (face[0].vt == absent) || (c.vn == absent) != (face[0].vn == absent)))
                 fail(file_, line, "corner '" + excerpt(token) + "' has another form than the face's first corner '" +
                                       excerpt(tokens[1]) + "'");
@@ -359,7 +265,7 @@ private:
                 names.push_back(std::move(name));
             }
         for (auto const& name : names) {
-            check_path_length(name, file_, line, "material library");
+            check_path_length(name, file_, line, "material library name");
             fs::path const library = folder / fs::path(name);
             auto const canonical = fs::weakly_canonical(library, ec);
             if (!libraries_read_.insert((ec ? library.lexically_normal() : canonical).string()).second) continue;
@@ -475,19 +381,20 @@ private:
 std::vector<mtl_material> parse_mtl(std::string_view text, std::string const& file_name) {
     std::vector<mtl_material> out;
     std::vector<std::string_view> tokens;
-    for_each_line(text, file_name, "MTL", [&](std::size_t line, std::string_view content) {
-        split(content, tokens);
-        if (tokens.empty()) return;
+    line_reader lines = text_lines(text, file_name, "MTL");
+    while (lines.next(tokens)) {
+        std::size_t const line = lines.number();
+        std::string_view const content = lines.line();
         std::string_view const op = tokens[0];
         if (equals_ignoring_case(op, "newmtl")) {
             out.push_back({});
             out.back().name = std::string(rest_after(content, op));
             out.back().line = line;
-            return;
+            continue;
         }
         bool const kd = equals_ignoring_case(op, "Kd"), map_kd = equals_ignoring_case(op, "map_Kd"),
                    map_d = equals_ignoring_case(op, "map_d");
-        if (!kd && !map_kd && !map_d) return;
+        if (!kd && !map_kd && !map_d) continue;
         if (out.empty()) fail(file_name, line, "'" + excerpt(op) + "' before any 'newmtl'");
         mtl_material& m = out.back();
         if (kd) {
@@ -506,7 +413,7 @@ std::vector<mtl_material> parse_mtl(std::string_view text, std::string const& fi
             m.alpha_texture = texture_path(content, tokens, file_name, line);
             m.alpha_texture_line = line;
         }
-    });
+    }
     return out;
 }
 

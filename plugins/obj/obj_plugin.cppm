@@ -37,6 +37,10 @@
 // materials naming the same texture files share one image. A polygon face fanned by
 // triangulate_polygon's fallback is counted in mesh_data::fanned_faces (compile() reports it).
 //
+// Lines, tokens, numbers and indices are read by canopy.scene:text's rules (a number is read
+// straight to the nearest float; hexadecimal, "inf" and "nan" are refused; a UTF-8 byte-order mark
+// is skipped).
+//
 // Errors (scene_error, "file:line: problem"; input quoted by a short prefix): bad or non-finite
 // numbers, numbers that overflow a float ("value 1e300 overflows a float"), zero or out-of-range
 // indices, faces with fewer than 3 corners, corners of mixed forms, a missing, unreadable or

@@ -26,7 +26,7 @@ namespace canopy {
 namespace {
 
 [[noreturn]] void fail(std::filesystem::path const& path, std::string const& what) {
-    throw image_error(path.string(), what);
+    throw scene_error(path.string(), "", what);
 }
 
 // OpenImageIO's message, on one line and at most a few hundred characters.

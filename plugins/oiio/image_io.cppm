@@ -18,32 +18,19 @@
 // --max-total-texels), is refused before any pixel is decoded (GIF, WebP and BMP headers are read here, since OpenImageIO decodes those images as
 // it opens them), as are images without pixels or channels, volumes and deep images.
 //
-// Failures throw image_error naming the file and the problem (missing file, unknown format,
-// truncated data, a limit), as "tree.png: image is 16384 × 16384 (268435456 texels), over the
+// Failures throw canopy::scene_error (canopy.scene:error) naming the file and the problem
+// (missing file, unknown format, truncated data, a limit), as "tree.png: image is 16384 × 16384 (268435456 texels), over the
 // limit of 67108864 texels (--max-texels)". OpenImageIO's headers stay in the implementation unit.
 module;
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
-#include <stdexcept>
 #include <string>
 #include <vector>
 export module canopy.image_io;
 
 export namespace canopy {
-
-struct image_error : std::runtime_error {
-    image_error(std::string file, std::string const& problem)
-        : std::runtime_error((file.empty() ? std::string("image") : file) + ": " + problem), file_(std::move(file)),
-          problem_(problem) {}
-
-    std::string const& file() const noexcept { return file_; }
-    std::string const& problem() const noexcept { return problem_; }
-
-private:
-    std::string file_, problem_;
-};
 
 // What read_image accepts; by default canopy::default_limits()'s values.
 struct image_read_limits {

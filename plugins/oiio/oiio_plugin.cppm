@@ -39,8 +39,6 @@ inline image_data read_texture_image(std::filesystem::path const& file, std::uin
             out.texels.resize(std::size_t(h.width) * std::size_t(h.height));
             return &out.texels.data()->x;
         });
-    } catch (image_error const& e) {
-        throw scene_error(file.string(), "", e.problem());
     } catch (std::bad_alloc const&) {
         throw scene_error(file.string(), "", "out of memory while reading the image");
     }

@@ -28,7 +28,8 @@
 // OFF headers, binary STL and OM headers, `f` lines of OBJ, `facet`s of ASCII STL) and throws
 // if they differ.
 //
-// Before OpenMesh sees a file it is checked here, walked as OpenMesh's reader of its format will
+// Before OpenMesh sees a file it is checked (the :checks partition, openmesh_checks.cppm; text by
+// canopy.scene:text's rules), walked as OpenMesh's reader of its format will
 // read it, so that bad input gives a clear message with a line (text formats) or an element
 // (binary formats) instead of OpenMesh's silent misreads, endless loops or allocations sized by a
 // count in the file. OpenMesh's readers trust counts (they reserve for them, and loop over them
@@ -52,7 +53,9 @@
 //                 indices in range
 //   STL           binary size against its triangle count and finite coordinates; ASCII: the three
 //                 lines OpenMesh reads after each "outer loop" are "vertex x y z"
-//   OBJ           v, vt and vn values, face indices in range, faces of fewer than three corners
+//   OBJ           v, vt and vn values, face corners of at most three parts with indices in range,
+//                 faces of fewer than three corners, no UTF-8 byte-order mark (OpenMesh would read it
+//                 as part of the first statement)
 //   OM            header present, counts against the file's size
 //
 // A file with vertices but no faces (a PLY point cloud) loads as a mesh without triangles:
