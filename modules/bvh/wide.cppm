@@ -4,7 +4,7 @@
 // largest surface area until it holds bvh_width children or only leaves (the greedy collapse of
 // Wald et al. 2008 / Embree). Leaves are kept as they are: every primitive stays in exactly one
 // leaf. The wide tree is never deeper than the binary one. Triangle BVHs then get their leaves
-// packed into blocks of four (pack_triangle_blocks).
+// packed into triangle blocks (pack_triangle_blocks).
 module;
 // No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
 // every path (scalar, SIMD, packet) rounds the same way.
@@ -91,35 +91,54 @@ std::vector<wide_bvh_node<S>> collapse_to_wide(std::vector<bvh_node<S>> const& n
     return wide;
 }
 
-// Moves the leaves' triangles of a triangle BVH (in `primitives`, leaf order) into blocks, leaf by
-// leaf in leaf order, and points the binary and wide leaves at their first block (count
-// unchanged); `primitives` is left empty.
+// Fills the triangle blocks of a triangle BVH straight from the input: leaf by leaf in leaf
+// order, the triangles prims[order[i]] with prim_id = order[i] (`order`: the input index of the
+// primitive at each leaf position), and points the binary and wide leaves at their first block
+// (count unchanged). `primitives` stays empty. Leaves are filled in parallel, each into blocks
+// placed beforehand (a prefix sum of the leaves' block counts), so the result does not depend on
+// the threads.
 template <typename Prim>
     requires stores_triangle_blocks_v<Prim>
-void pack_triangle_blocks(bvh<Prim>& b) {
-    b.blocks.clear();
-    std::vector<std::uint32_t> first_block(b.primitives.size(), invalid_id); // by a leaf's first primitive
+void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector<std::uint32_t> const& order) {
     std::vector<std::uint32_t> leaf_starts;
     for (auto const& n : b.nodes)
         if (n.is_leaf()) leaf_starts.push_back(n.index);
     std::sort(leaf_starts.begin(), leaf_starts.end());
-    std::size_t blocks = 0;
-    for (std::size_t k = 0; k < leaf_starts.size(); ++k) {
-        std::size_t const end = k + 1 < leaf_starts.size() ? leaf_starts[k + 1] : b.primitives.size();
-        blocks += (end - leaf_starts[k] + triangle_block_width - 1) / triangle_block_width;
-    }
-    b.blocks.reserve(blocks);
-    for (std::size_t k = 0; k < leaf_starts.size(); ++k) {
-        std::size_t const end = k + 1 < leaf_starts.size() ? leaf_starts[k + 1] : b.primitives.size();
-        first_block[leaf_starts[k]] = std::uint32_t(b.blocks.size());
-        append_triangle_blocks(b.blocks, b.primitives.begin() + std::ptrdiff_t(leaf_starts[k]),
-                               b.primitives.begin() + std::ptrdiff_t(end));
-    }
+    std::size_t const leaves = leaf_starts.size();
+    auto const leaf_end = [&](std::size_t k) { return k + 1 < leaves ? std::size_t(leaf_starts[k + 1]) : order.size(); };
+    // first_block[k]: the first block of the k-th leaf in leaf order; first_block[leaves]: the total.
+    std::vector<std::uint32_t> first_block(leaves + 1, 0);
+    for (std::size_t k = 0; k < leaves; ++k)
+        first_block[k + 1] = first_block[k] +
+                             std::uint32_t((leaf_end(k) - leaf_starts[k] + triangle_block_width - 1) / triangle_block_width);
+    b.blocks.clear();
+    b.blocks.resize(first_block[leaves]);
+    parallel_for_chunks(leaves, 256, [&](std::size_t first, std::size_t last) {
+        for (std::size_t k = first; k < last; ++k) {
+            std::size_t const begin = leaf_starts[k], end = leaf_end(k);
+            for (std::size_t i = begin; i < end; ++i) {
+                auto& block = b.blocks[first_block[k] + (i - begin) / triangle_block_width];
+                int const lane = int((i - begin) % triangle_block_width);
+                if (lane == 0) {
+                    block.prim_id.fill(invalid_id);
+                    block.geom_id.fill(invalid_id);
+                }
+                Prim t = prims[order[i]];
+                t.prim_id = order[i];
+                block.set(lane, t);
+            }
+        }
+    });
+    // A leaf's first position → its first block.
+    auto const block_of = [&](std::uint32_t start) {
+        auto const k = std::size_t(std::lower_bound(leaf_starts.begin(), leaf_starts.end(), start) - leaf_starts.begin());
+        return first_block[k];
+    };
     for (auto& n : b.nodes)
-        if (n.is_leaf()) n.index = first_block[n.index];
+        if (n.is_leaf()) n.index = block_of(n.index);
     for (auto& node : b.wide_nodes)
         for (std::size_t k = 0; k < std::size_t(bvh_width); ++k)
-            if (node.count[k] != 0) node.child[k] = first_block[node.child[k]];
+            if (node.count[k] != 0) node.child[k] = block_of(node.child[k]);
     b.primitives = {};
 }
 
@@ -127,21 +146,24 @@ namespace detail {
 
 // The last steps of a build, once result.nodes holds the binary tree (leaves indexing `order`,
 // which gives the input index of the primitive at each leaf position; an index may appear more
-// than once, see canopy.bvh:spatial): the wide nodes, the primitives in leaf order with prim_id =
-// their input index, size = the input count, and the triangle blocks.
+// than once, see canopy.bvh:spatial): the wide nodes, size = the input count, and the primitives
+// in leaf order with prim_id = their input index (triangle BVHs: in blocks, pack_triangle_blocks).
 template <typename Prim>
 void finish_build(bvh<Prim>& result, std::span<Prim const> prims, std::vector<std::uint32_t> const& order) {
     result.wide_nodes = collapse_to_wide(result.nodes);
-    result.primitives.resize(order.size());
-    parallel_for_chunks(order.size(), 1024, [&](std::size_t first, std::size_t last) {
-        for (std::size_t i = first; i < last; ++i) {
-            result.primitives[i] = prims[order[i]];
-            if constexpr (requires(Prim& p) { p.prim_id = std::uint32_t(0); })
-                result.primitives[i].prim_id = order[i];
-        }
-    });
     result.size = prims.size();
-    if constexpr (stores_triangle_blocks_v<Prim>) pack_triangle_blocks(result);
+    if constexpr (stores_triangle_blocks_v<Prim>) {
+        pack_triangle_blocks(result, prims, order);
+    } else {
+        result.primitives.resize(order.size());
+        parallel_for_chunks(order.size(), 1024, [&](std::size_t first, std::size_t last) {
+            for (std::size_t i = first; i < last; ++i) {
+                result.primitives[i] = prims[order[i]];
+                if constexpr (requires(Prim& p) { p.prim_id = std::uint32_t(0); })
+                    result.primitives[i].prim_id = order[i];
+            }
+        });
+    }
 }
 
 } // namespace detail
