@@ -1,6 +1,8 @@
 // canopy.bvh:build — binned SAH builder (Wald 2007, "On fast Construction of SAH-based Bounding
 // Volume Hierarchies"), binning primitive centroids on all three axes, subtrees built in parallel
-// (oneTBB task groups).
+// (oneTBB task groups). The primitives' boxes are partitioned in place as 32-byte references
+// (prim_ref, Embree's PrimRef); float boxes are binned and swept with 4-lane vectors, the three
+// axes at once (vector_binning).
 //
 // bvh_build_options::quality = build_quality::high hands triangle BVHs to the split-BVH builder
 // (canopy.bvh:spatial), where a triangle may be referenced from several leaves; the rest of this
