@@ -234,29 +234,27 @@ struct node_tester<T, S, I, Fused> {
     wide_box_ray<Fused> box_ray;
 };
 
-// Starts loading the memory of the hit children (wide nodes, or a leaf's primitives) into the
-// cache, so that the loads of all of them overlap with each other and with the work on the
+// Starts loading the memory of one pending child (a wide node, or a leaf's primitives) into the
+// cache, so that the loads of all hit children overlap with each other and with the work on the
 // current node, instead of each waiting for memory when its turn comes.
-template <typename Prim, typename S>
-[[gnu::always_inline]] inline void prefetch_children(bvh_storage<Prim> const& b, wide_bvh_node<S> const& node,
-                                                     std::uint32_t mask) {
+template <typename Prim>
+[[gnu::always_inline]] inline void prefetch_child(bvh_storage<Prim> const& b, std::uint32_t child,
+                                                  std::uint32_t count) {
     constexpr std::uintptr_t line = 64;
-    for (; mask != 0; mask &= mask - 1) {
-        auto const i = std::size_t(std::countr_zero(mask));
-        if (node.count[i] == 0) {
-            // A wide node: aligned to a cache line, sizeof(wide_bvh_node<S>) / 64 lines.
-            auto const* p = reinterpret_cast<char const*>(&b.wide_nodes[node.child[i]]);
-            for (std::size_t k = 0; k < sizeof(wide_bvh_node<S>); k += line) __builtin_prefetch(p + k);
-        } else if constexpr (stores_triangle_blocks_v<Prim>) {
-            // The leaf's first block (most leaves have one): aligned, three lines.
-            auto const* p = reinterpret_cast<char const*>(&b.leaves[node.child[i]]);
-            for (std::size_t k = 0; k < sizeof(triangle_block); k += line) __builtin_prefetch(p + k);
-        } else {
-            auto const begin = reinterpret_cast<std::uintptr_t>(&b.leaves[node.child[i]]);
-            auto const end = begin + node.count[i] * sizeof(Prim);
-            for (std::uintptr_t a = begin & ~(line - 1); a < end; a += line)
-                __builtin_prefetch(reinterpret_cast<void const*>(a));
-        }
+    using S = typename bvh<Prim>::value_type;
+    if (count == 0) {
+        // A wide node: aligned to a cache line, sizeof(wide_bvh_node<S>) / 64 lines.
+        auto const* p = reinterpret_cast<char const*>(&b.wide_nodes[child]);
+        for (std::size_t k = 0; k < sizeof(wide_bvh_node<S>); k += line) __builtin_prefetch(p + k);
+    } else if constexpr (stores_triangle_blocks_v<Prim>) {
+        // The leaf's first block (most leaves have one): aligned to a cache line.
+        auto const* p = reinterpret_cast<char const*>(&b.leaves[child]);
+        for (std::size_t k = 0; k < sizeof(triangle_block); k += line) __builtin_prefetch(p + k);
+    } else {
+        auto const begin = reinterpret_cast<std::uintptr_t>(&b.leaves[child]);
+        auto const end = begin + count * sizeof(Prim);
+        for (std::uintptr_t a = begin & ~(line - 1); a < end; a += line)
+            __builtin_prefetch(reinterpret_cast<void const*>(a));
     }
 }
 
@@ -294,28 +292,31 @@ struct traversal_stack {
 };
 
 // The hit children of `node` in visiting order: returns the first to visit and pushes the
-// others so that they pop in order. Near to far when the query wants it (closest, multi hit; as
-// Embree's traverseClosestHit: one and two children without sorting, more sorted by insertion
-// straight into the stack, farthest deepest); else in increasing slot order (any hit: every hit
-// child is visited until one primitive is hit). Slot order makes any-hit traversal a depth-first
-// walk in one fixed order, whichever children a ray hits: a packet visits the leaves each of its
-// lanes would visit alone in the same relative order, so each lane finds the same first hit
-// (canopy.query:batch).
-template <bool near_first, typename S, typename L>
-[[gnu::always_inline]] inline traversal_entry<S, L> order_children(wide_bvh_node<S> const& node,
+// others so that they pop in order, each prefetched as it is read (prefetch_child). Near to far
+// when the query wants it (closest, multi hit; as Embree's traverseClosestHit: one and two
+// children without sorting, more sorted by insertion straight into the stack, farthest deepest);
+// else in increasing slot order (any hit: every hit child is visited until one primitive is hit).
+// Slot order makes any-hit traversal a depth-first walk in one fixed order, whichever children a
+// ray hits: a packet visits the leaves each of its lanes would visit alone in the same relative
+// order, so each lane finds the same first hit (canopy.query:batch).
+template <bool near_first, typename Prim, typename S, typename L>
+[[gnu::always_inline]] inline traversal_entry<S, L> order_children(bvh_storage<Prim> const& b,
+                                                                   wide_bvh_node<S> const& node,
                                                                    child_hits<S, L> const& hits,
                                                                    traversal_stack<S, L>& stack) {
     auto const entry = [&](std::uint32_t i) {
         traversal_entry<S, L> e{node.child[i], node.count[i], hits.tnear[i]};
         if constexpr (!std::is_same_v<L, no_lanes>) e.lanes = hits.lanes[i];
+        prefetch_child(b, e.child, e.count);
         return e;
     };
-    std::uint32_t const first = std::uint32_t(std::countr_zero(hits.mask));
+    // hits.mask is not zero: its lowest set bit is defined.
+    std::uint32_t const first = std::uint32_t(__builtin_ctz(hits.mask));
     std::uint32_t rest = hits.mask & (hits.mask - 1);
     if constexpr (!near_first) {
         // Pushed from the highest slot down: they pop in increasing slot order.
         for (; rest != 0;) {
-            auto const i = std::uint32_t(31 - std::countl_zero(rest));
+            auto const i = std::uint32_t(31 - __builtin_clz(rest));
             stack.push(entry(i));
             rest &= ~(1u << i);
         }
@@ -324,7 +325,7 @@ template <bool near_first, typename S, typename L>
         auto const one = entry(first);
         if (rest == 0) return one;
         if ((rest & (rest - 1)) == 0) {
-            auto const two = entry(std::uint32_t(std::countr_zero(rest)));
+            auto const two = entry(std::uint32_t(__builtin_ctz(rest)));
             bool const two_first = two.tnear < one.tnear;
             stack.push(two_first ? one : two);
             return two_first ? two : one;
@@ -333,7 +334,7 @@ template <bool near_first, typename S, typename L>
         auto* const e = stack.entries.data();
         e[stack.size++] = one;
         for (; rest != 0; rest &= rest - 1) {
-            auto const next = entry(std::uint32_t(std::countr_zero(rest)));
+            auto const next = entry(std::uint32_t(__builtin_ctz(rest)));
             int j = stack.size++;
             for (; j > base && e[j - 1].tnear < next.tnear; --j) e[j] = e[j - 1];
             e[j] = next;
@@ -382,8 +383,7 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
             auto const& node = b.wide_nodes[current.child];
             auto const hits = nodes.test(node, current.lanes);
             if (hits.mask != 0) {
-                prefetch_children(b, node, hits.mask);
-                current = order_children<Query::wants_near_first>(node, hits, stack);
+                current = order_children<Query::wants_near_first>(b, node, hits, stack);
                 continue;
             }
         } else if constexpr (std::is_same_v<L, no_lanes>) {

@@ -56,20 +56,25 @@ using hit_record = basic_hit_record<ray_value_t<Ray>>;
 // The ids of the instances a traversal has entered, outermost first: queries keep one and copy
 // it into the hit records they accept; hooks read the current one through instance_ids(ray).
 struct instance_path {
-    std::array<std::uint32_t, max_instance_depth> ids{};
+    // ids[k] for k < depth; the entries past depth hold invalid_id, so that stamping a record is a
+    // plain copy.
+    std::array<std::uint32_t, max_instance_depth> ids = [] {
+        std::array<std::uint32_t, max_instance_depth> a;
+        a.fill(invalid_id);
+        return a;
+    }();
     int depth = 0;
 
     // (inline: member functions in a named module are not implicitly inline, and these run at
     // every instance entry.)
     inline void enter_instance(std::uint32_t id) { ids[std::size_t(depth++)] = id; }
-    inline void leave_instance() { --depth; }
+    inline void leave_instance() { ids[std::size_t(--depth)] = invalid_id; }
 
     template <typename T>
     inline void stamp(basic_hit_record<T>& hr) const {
         using index_t = index_type_t<T>;
-        hr.inst_id = depth > 0 ? index_t(ids[0]) : index_t(invalid_id);
-        for (int k = 1; k < max_instance_depth; ++k)
-            hr.inner_inst_id[std::size_t(k - 1)] = k < depth ? index_t(ids[std::size_t(k)]) : index_t(invalid_id);
+        hr.inst_id = index_t(ids[0]);
+        for (std::size_t k = 1; k < max_instance_depth; ++k) hr.inner_inst_id[k - 1] = index_t(ids[k]);
     }
 };
 
