@@ -198,7 +198,7 @@ TEST_CASE("a single untransformed mesh is traced without a top level") {
     CHECK(c.statistics.identity_transform_nodes == 1);
     CHECK(decided(c, "no top-level BVH"));
     CHECK(c.top_mesh_instances.empty());
-    CHECK(c.top1.empty());
+    CHECK(c.top_meshes_bvh.empty());
     check_against_brute_force(c, 300, 1);
     // Bit for bit what the mesh BVH gives when traced directly.
     auto const tris = canopy::make_icosphere(2);
@@ -367,7 +367,7 @@ TEST_CASE("the alpha-mask intersector is needed only when a placed mesh has a ma
     CHECK(c.statistics.alpha_mask_needed);
     CHECK(c.statistics.masked_materials_used == 1);
     REQUIRE(c.textures.size() == 1);
-    CHECK(c.materials[std::size_t(mat) + 1].alpha_mask);
+    CHECK(c.materials[std::size_t(mat) + 1].alpha == canopy::alpha_mode::mask);
     CHECK(c.materials[std::size_t(mat) + 1].texture == 0);
     CHECK(c.meshes[0].material == mat + 1);
 }
