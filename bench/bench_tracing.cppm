@@ -1,6 +1,7 @@
-// canopy.bench_tracing — what the benchmark drivers share: a bench scene built as Canopy BVHs
-// (one level, or a top-level BVH over instances of one mesh), one query on it, a counting
-// intersector, and the three ray sets of a scene.
+// canopy.bench_tracing — what the benchmark drivers share: a bench scene compiled as `canopy
+// trace` compiles a file of the bench formats (canopy.plugins.bench's layout, then compile() with
+// keep_single_instance: one mesh BVH, or a top-level BVH over instances of the mesh, inst_id = the
+// instance's index), one query on it, a counting intersector, and the three ray sets of a scene.
 //
 //   primary  a 512 × 512 pinhole camera looking at the scene's box from outside
 //   random   origins uniform in the scene's box, directions from a normal distribution
@@ -19,29 +20,38 @@ export module canopy.bench_tracing;
 export import canopy;
 export import canopy.bench_formats;
 export import canopy.bench_scenes;
+export import canopy.scene;
+import canopy.plugins.bench;
 
 export namespace canopy::bench {
 
 struct canopy_scene {
-    bvh<triangle> mesh;
-    std::vector<instance<bvh<triangle>>> instances;
-    bvh<instance<bvh<triangle>>> top;
-    bool instanced = false;
-    std::size_t bytes = 0;
+    compiled_scene scene; // levels 0: the mesh alone; levels 1: instances of meshes[0]
+    std::size_t bytes = 0; // of the BVHs (canopy::compute_stats)
 };
 
-// The mesh is built with `mesh_options` (the top level over instances with the defaults).
-std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in, bvh_build_options const& mesh_options = {}) {
+// Bytes of the scene's BVHs: the mesh's and, when instanced, the top level's.
+std::size_t bvh_bytes(compiled_scene const& c) {
+    std::size_t bytes = compute_stats(c.meshes[0].accel).bytes;
+    if (c.levels > 0) bytes += c.visit_root([](auto const& root) { return compute_stats(root).bytes; });
+    return bytes;
+}
+
+// Rebuilds the scene's BVHs with `options` (what the drivers time against Embree's build: the
+// mesh BVH, the instances and the top level) and counts their bytes.
+void rebuild(canopy_scene& s, bvh_build_options const& options) {
+    s.scene.build(options);
+    s.bytes = bvh_bytes(s.scene);
+}
+
+// The scene compiled with `options` for the mesh BVH (the top level over instances is no
+// triangle BVH: the quality does not apply to it).
+std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in, bvh_build_options const& options = {}) {
+    scene graph;
+    add_bench_scene(graph, graph.root(), in.mesh, in.instances, in.name, in.name);
     auto s = std::make_unique<canopy_scene>();
-    s->mesh = build_binned_sah(in.mesh, mesh_options);
-    s->bytes = compute_stats(s->mesh).bytes;
-    if (!in.instances.empty()) {
-        for (std::size_t k = 0; k < in.instances.size(); ++k)
-            s->instances.emplace_back(s->mesh, in.instances[k], std::uint32_t(k));
-        s->top = build_binned_sah(s->instances);
-        s->bytes += compute_stats(s->top).bytes;
-        s->instanced = true;
-    }
+    s->scene = compile(graph, {.bvh = options, .name = in.name, .keep_single_instance = true});
+    s->bytes = bvh_bytes(s->scene);
     return s;
 }
 
@@ -58,18 +68,16 @@ inline bool parse_quality(std::string const& name, build_quality& quality) {
 template <typename Isect>
 batch_stats canopy_trace_batch(canopy_scene const& s, std::span<ray const> rays, bool closest, Isect& isect,
                                std::span<basic_hit_record<float>> out) {
-    if (s.instanced)
-        return closest ? closest_hit(rays, &s.top, &s.top + 1, out, isect) : any_hit(rays, &s.top, &s.top + 1, out, isect);
-    return closest ? closest_hit(rays, &s.mesh, &s.mesh + 1, out, isect) : any_hit(rays, &s.mesh, &s.mesh + 1, out, isect);
+    return s.scene.visit_root([&](auto const& root) {
+        return closest ? closest_hit(rays, &root, &root + 1, out, isect) : any_hit(rays, &root, &root + 1, out, isect);
+    });
 }
 
 template <typename Isect>
 bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect& isect) {
-    basic_hit_record<float> hr;
-    if (s.instanced)
-        hr = closest ? closest_hit(r, &s.top, &s.top + 1, isect) : any_hit(r, &s.top, &s.top + 1, isect);
-    else
-        hr = closest ? closest_hit(r, &s.mesh, &s.mesh + 1, isect) : any_hit(r, &s.mesh, &s.mesh + 1, isect);
+    basic_hit_record<float> const hr = s.scene.visit_root([&](auto const& root) {
+        return closest ? closest_hit(r, &root, &root + 1, isect) : any_hit(r, &root, &root + 1, isect);
+    });
     if (!hr.hit) return {};
     return {hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v};
 }
@@ -115,8 +123,10 @@ struct ray_set {
     bool shadow = false; // traced with any-hit only
 };
 
-std::vector<ray_set> make_rays(canopy_scene const& s, aabb const& box) {
+// The ray sets of the scene's bounding box.
+std::vector<ray_set> make_rays(canopy_scene const& s) {
     std::vector<ray_set> sets;
+    aabb const box = s.scene.bounds();
     auto const c = center(box);
     auto const d = diagonal(box);
     float const extent = length(d);

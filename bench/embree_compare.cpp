@@ -8,19 +8,23 @@
 // terrain, a 500k triangle soup, a forest of 10,000 instances of a 51k-triangle tree, two real
 // models (the glTF engine of assimp's examples, glmark2's bunny; skipped with a note when the
 // file is missing) and a scene of thin triangles. --scenes picks some; --quick shrinks every
-// generated scene about 16× for smoke tests; --scene traces one file of the bench formats
-// (canopy.bench_formats) instead.
+// generated scene about 16× for smoke tests; --scene traces one file of the bench formats instead,
+// loaded by the bench plugin and compiled as `canopy trace` compiles it.
 //
 // Rays per scene: primary (a 512 × 512 pinhole camera), random (origins in the scene's box,
 // random directions) and shadow (from the primary hits toward a light; any hit only). Each set is
 // traced closest hit and any hit, with every Canopy intersector of `intersector_variants` below:
 // none, and the alpha rule of the bench formats (Embree: an intersection filter function).
 //
+// Canopy traces each scene as compile() lays it out (canopy.bench_tracing: the bench plugin's
+// scene graph, one mesh BVH or a top level over its instances).
+//
 // Timing: for each scene, thread count, ray set, query and intersector, --rounds interleaved
 // rounds (default 5); a round times Canopy then Embree over the whole ray set (the order swapped
 // every other round) with tbb::parallel_for under tbb::global_control(threads). Reported: the
 // median and the best Mrays/s of each library and the ratios Canopy / Embree of the medians (the
-// main figure) and of the bests. Build time is measured the same way (ratio > 1: Canopy slower);
+// main figure) and of the bests. Build time is measured the same way (ratio > 1: Canopy slower;
+// Canopy: its BVHs rebuilt in the compiled scene, Embree: its scenes from the same triangles);
 // memory per stored triangle: canopy::compute_stats(bvh).bytes summed over the BVHs against
 // Embree's device memory monitor.
 //
@@ -61,6 +65,7 @@
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 import canopy.bench_tracing;
+import canopy.plugins.bench;
 
 namespace {
 
@@ -392,13 +397,12 @@ void run_scene(bench_scene const& in, settings const& opt) {
         rtcSetDeviceMemoryMonitorFunction(device, memory_monitor, nullptr);
 
         // Build: interleaved rounds as for the rays; the scenes of the last round are traced.
-        std::unique_ptr<canopy_scene> cs;
+        std::unique_ptr<canopy_scene> const cs = build_canopy(in, {.quality = opt.quality});
         std::unique_ptr<embree_scene> es;
         long long embree_memory = 0;
         auto const canopy_build = [&] {
-            cs.reset();
             auto const t = clock_type::now();
-            cs = build_canopy(in, {.quality = opt.quality});
+            canopy::bench::rebuild(*cs, {.quality = opt.quality});
             return seconds_since(t) * 1e3;
         };
         auto const embree_build = [&] {
@@ -419,7 +423,7 @@ void run_scene(bench_scene const& in, settings const& opt) {
             double const triangles = double(in.mesh.size());
             print_row("–", "memory (bytes/triangle stored)", {double(cs->bytes) / triangles, double(cs->bytes) / triangles},
                       {double(embree_memory) / triangles, double(embree_memory) / triangles}, 1);
-            sets = make_rays(*cs, cs->instanced ? cs->top.bounds() : cs->mesh.bounds());
+            sets = make_rays(*cs);
         }
         print_row(fmt::format("{}", threads), "build (ms; ratio > 1: Canopy slower)", summarize(builds.canopy, false),
                   summarize(builds.embree, false), 1);
@@ -482,12 +486,17 @@ std::optional<settings> parse_command_line(int argc, char** argv) {
     return opt;
 }
 
+// A file of the bench formats, loaded by the bench plugin and compiled as `canopy trace` does: the
+// mesh and the instances' transforms, as compile() placed them.
 bench_scene load_scene_file(std::filesystem::path const& p) {
-    if (p.extension() == ".inst") {
-        auto inst = canopy::read_bench_inst(p);
-        return {p.filename().string(), "file", std::move(inst.mesh.triangles), std::move(inst.instances), {}};
-    }
-    return {p.filename().string(), "file", canopy::read_bench_obj(p).triangles, {}, {}};
+    canopy::registry bench;
+    canopy::register_bench_plugin(bench);
+    canopy::scene graph;
+    bench.load(graph, p, graph.root(), "bench");
+    canopy::compiled_scene const c = canopy::compile(graph, {.name = p.string(), .keep_single_instance = true});
+    bench_scene out{p.filename().string(), "file", c.meshes[0].triangles, {}, {}};
+    for (canopy::placement const& placed : c.top_meshes) out.instances.push_back(placed.transform);
+    return out;
 }
 
 std::string cpu_model() {

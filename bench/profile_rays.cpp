@@ -115,15 +115,16 @@ int main(int argc, char** argv) {
     auto const s = build_canopy(scene, options);
     double const build_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - build_start).count();
-    auto const st = canopy::compute_stats(s->mesh);
+    canopy::bvh<canopy::triangle> const& mesh = s->scene.meshes[0].accel;
+    auto const st = canopy::compute_stats(mesh);
     std::size_t references = 0;
-    for (auto const& n : s->mesh.nodes) references += n.is_leaf() ? n.count : 0;
+    for (auto const& n : mesh.nodes) references += n.is_leaf() ? n.count : 0;
     std::printf("mesh BVH (%s): %zu triangles, %zu references, %zu leaves (%.2f references each), %zu wide nodes, "
-                "%zu blocks, depth %d, SAH %.2f, %.1f bytes/triangle, built in %.0f ms\n",
-                s->mesh.quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,
+                "%zu blocks, depth %d, SAH %.2f, %.1f bytes/triangle, compiled in %.0f ms\n",
+                mesh.quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,
                 st.leaf_count, double(references) / double(st.leaf_count), st.wide_node_count,
-                s->mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive, build_ms);
-    auto sets = make_rays(*s, s->instanced ? s->top.bounds() : s->mesh.bounds());
+                mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive, build_ms);
+    auto sets = make_rays(*s);
     for (auto& set : sets) {
         if (set.name != set_name) continue;
         if (count != 0 && count < set.rays.size()) set.rays.resize(count);

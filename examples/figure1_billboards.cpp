@@ -12,7 +12,8 @@
 //
 //   figure1_billboards [OUT_DIR [WIDTHxHEIGHT]]     (defaults: figure1, 640x480)
 //
-// The scene is the demo forest of canopy.billboard_forest: instanced billboard quads (mesh 2,
+// The scene is the demo forest, the procedural plugin's billboard_forest generator compiled by
+// compile() (what `canopy render` draws without a scene): instanced billboard quads (mesh 2,
 // texture coordinates (0,0) top-left … (1,1) bottom-right) among spheres on a ground plane.
 #include <algorithm>
 #include <cmath>
@@ -23,15 +24,16 @@
 #include <utility>
 #include <vector>
 import canopy;
-import canopy.billboard_forest;
 import canopy.image_io;
+import canopy.scene;
+import canopy.plugins.procedural;
 
 namespace {
 
 using canopy::vec2;
 using canopy::vec4;
 
-constexpr unsigned billboard_mesh = 2;
+constexpr unsigned billboard_mesh = 2; // the generator's meshes compile as ground, sphere, billboard
 
 // The paper's texture alpha mask: hits on billboards survive only where the texture is opaque.
 struct texture_alpha_mask : canopy::basic_intersector<texture_alpha_mask> {
@@ -82,17 +84,6 @@ struct bvh_costs : canopy::basic_intersector<bvh_costs> {
     unsigned num_tris = 0;
 };
 
-canopy::texture2d<vec4<float>> load_texture(std::filesystem::path const& file) {
-    canopy::rgba_image const image = canopy::read_image(file);
-    std::vector<vec4<float>> texels;
-    for (int y = 0; y < image.height; ++y)
-        for (int x = 0; x < image.width; ++x) {
-            float const* p = image.at(x, y);
-            texels.emplace_back(p[0], p[1], p[2], p[3]);
-        }
-    return {image.width, image.height, std::move(texels), {canopy::filter_mode::bilinear, canopy::address_mode::clamp}};
-}
-
 // Writes a framebuffer as an 8-bit image: linear colours are sRGB-encoded, heat colours are not.
 void save(std::filesystem::path const& file, canopy::framebuffer const& fb, bool linear) {
     canopy::rgba_image image;
@@ -115,11 +106,13 @@ int main(int argc, char** argv) try {
     }
     std::filesystem::create_directories(out);
 
-    // The scene and a camera looking at it.
-    auto const forest = canopy::make_billboard_forest(load_texture(std::filesystem::path(CANOPY_ASSET_DIR) / "tree.png"));
-    canopy::compiled_scene const& scene = forest.scene;
-    auto const camera = canopy::pinhole_camera::look_at(forest.camera_eye, forest.camera_target, {0.0f, 1.0f, 0.0f},
-                                                        forest.camera_fovy, float(width) / float(height));
+    // The scene, compiled, and its camera.
+    canopy::registry plugins;
+    canopy::register_procedural_plugin(plugins);
+    canopy::scene forest;
+    plugins.generate(forest, "billboard_forest", {});
+    canopy::compiled_scene const scene = canopy::compile(forest);
+    auto const camera = scene.render_camera(float(width) / float(height));
     auto const primary_ray = [&](int x, int y) {
         return camera.primary_ray(float(x) + 0.5f, float(y) + 0.5f, width, height);
     };

@@ -90,7 +90,7 @@ int main(int argc, char** argv) try {
     print_stats("ground BVH", canopy::compute_stats(scene.meshes[0].accel));
     print_stats("fine sphere BVH", canopy::compute_stats(scene.meshes[1].accel));
     print_stats("coarse sphere BVH", canopy::compute_stats(scene.meshes[2].accel));
-    print_stats("top-level BVH", canopy::compute_stats(scene.top1));
+    print_stats("top-level BVH", canopy::compute_stats(scene.top_meshes_bvh));
 
     // One image, primary visibility with sun shadows.
     auto const camera = canopy::pinhole_camera::look_at({0.0f, 9.0f, 17.0f}, {0.0f, 0.0f, 0.0f}, {0.0f, 1.0f, 0.0f},

@@ -6,7 +6,9 @@
 // Rules, each counted in compile_statistics and stated in its decisions list:
 //   - every mesh is built once, however often it is placed; meshes no node reaches are not built,
 //     images no used material refers to are not converted;
-//   - a scene that is one mesh with an identity transform gets no top-level BVH (levels 0);
+//   - a scene that is one mesh with an identity transform gets no top-level BVH (levels 0), unless
+//     an instance node placed it and compile_options::keep_single_instance asks to keep it
+//     (levels 1: hits then report inst_id 0, as the bench formats' `inst` field requires);
 //   - identity transforms (transform nodes, instances) are not applied: the placement is marked
 //     identity and the traversal reuses the ray as it is;
 //   - an instance of a subtree that holds one mesh places that mesh directly (no extra level); a
@@ -80,6 +82,11 @@ struct compile_options {
     bvh_build_options bvh{};           // the builder's options; bvh.quality: automatic (default), fast or high
     std::string name{};                // how errors name the scene (usually its file)
     resource_limits limits = default_limits(); // placements after flattening, nesting depth
+    // A scene that is one identity instance of one mesh keeps its top level (levels 1, a BVH over
+    // that instance), so that hits report the instance's inst_id (0) rather than none: what the
+    // bench formats (`canopy trace`) require. A mesh placed without an instance node is still
+    // traced directly (levels 0), as is everything when this is off (the default).
+    bool keep_single_instance = false;
 };
 
 
@@ -190,6 +197,7 @@ public:
         };
         std::vector<group_item> groups_placed;
         std::vector<placement> loose; // placement::index is the scene's mesh until renumbered
+        bool placed_by_instance = false; // loose[0] was placed by an instance node
         expand(top_, s_.root(), frame{}, [&](node_id leaf, frame const& where, std::uint32_t, bool) {
             node const& nd = nodes_[leaf];
             switch (nd.kind) {
@@ -202,6 +210,7 @@ public:
                         loose.push_back(make_placement(mesh, placed, nd.instance_id, leaf, nullptr));
                     });
                     ++direct_single_mesh_;
+                    placed_by_instance = loose.size() == 1;
                 } else {
                     groups_placed.push_back({group_of(nd.target), at, nd.instance_id, leaf});
                 }
@@ -242,9 +251,14 @@ public:
         // Levels and placements.
         compiled_scene c;
         if (groups_placed.empty()) {
-            if (loose.size() == 1 && loose[0].transform.is_identity()) {
+            if (loose.size() == 1 && loose[0].transform.is_identity() && !(o_.keep_single_instance && placed_by_instance)) {
                 c.levels = 0;
                 decide("one mesh with an identity transform: traced directly, no top-level BVH (levels 0)");
+            } else if (loose.size() == 1 && loose[0].transform.is_identity()) {
+                c.levels = 1;
+                c.top_meshes = std::move(loose);
+                decide("one identity instance of one mesh: top-level BVH kept, so that hits report its inst_id "
+                       "(keep_single_instance; levels 1)");
             } else {
                 c.levels = 1;
                 c.top_meshes = std::move(loose);
@@ -296,11 +310,7 @@ public:
         std::vector<int> texture_of_image(s_.images().size(), -1);
         c.materials.assign(1, material{});
         for (auto const& md : s_.materials()) {
-            material m;
-            m.albedo = md.colour;
-            m.alpha_cutoff = md.alpha_cutoff;
-            m.alpha_mask = md.alpha == alpha_mode::mask;
-            c.materials.push_back(m);
+            c.materials.push_back({.colour = md.colour, .alpha = md.alpha, .alpha_cutoff = md.alpha_cutoff});
         }
         stats_.materials = s_.materials().size();
         std::vector<bool> material_used(c.materials.size(), false);
@@ -363,8 +373,8 @@ public:
                 }
                 c.materials[i].texture = texture_of_image[std::size_t(image)];
             }
-            if (c.materials[i].alpha_mask) {
-                if (c.materials[i].texture < 0) c.materials[i].alpha_mask = false; // nothing to mask by
+            if (c.materials[i].alpha == alpha_mode::mask) {
+                if (c.materials[i].texture < 0) c.materials[i].alpha = alpha_mode::opaque; // nothing to mask by
                 else ++stats_.masked_materials_used;
             }
         }

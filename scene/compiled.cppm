@@ -1,23 +1,26 @@
 // canopy.scene:compiled — what a scene compiles into, ready for queries and rendering.
 //
 // Meshes are built into BVHs once each. Placements put them in the world in up to two instance
-// levels, chosen by compile() (canopy.scene:compile) or set by hand before build():
-//   levels 0  one mesh traced directly, no top level (a single untransformed mesh)
-//   levels 1  a top-level BVH over instances of meshes (top_meshes)
-//   levels 2  a top-level BVH over instances of groups (top_groups); each group is a BVH over
-//             instances of meshes (a shared subtree of the scene graph, built once)
+// levels, chosen by compile() (canopy.scene:compile) or set by hand before build(). The level
+// says which BVH is the root, the one every query starts from (visit_root):
+//   levels 0  meshes[0].accel: one mesh traced directly, no top level (a single untransformed mesh)
+//   levels 1  top_meshes_bvh: a BVH over instances of meshes (top_meshes)
+//   levels 2  top_groups_bvh: a BVH over instances of groups (top_groups); each group is a BVH
+//             over instances of meshes (a shared subtree of the scene graph, built once)
 // Ids in hit records: geom_id = mesh index, prim_id = triangle index in that mesh; inst_id = the
 // index of the top-level placement (invalid_id at level 0); at level 2 inner_inst_id[0] = the
 // index of the placement inside its group.
 //
 // compiled_scene provides what canopy.render's kernels need (closest_hit, any_hit, surface,
-// background) and the texture coordinates at a hit (uv), which alpha-mask intersectors use.
+// background), the texture coordinates at a hit (uv), which alpha-mask intersectors use, and the
+// camera and lights an application renders it with (render_camera, render_lights).
 module;
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -25,15 +28,19 @@ module;
 export module canopy.scene:compiled;
 export import canopy.render;
 export import canopy.texture;
+import :error;
 import :graph;
 
 export namespace canopy {
 
+// A material as kernels and masks read it: the fields and defaults of the scene graph's
+// material_data (canopy.scene:graph), its image resolved to a texture of the compiled scene.
 struct material {
-    vec3<float> albedo{0.7f, 0.7f, 0.7f};
-    int texture = -1;           // index into compiled_scene::textures, or -1
-    bool alpha_mask = false;    // the texture's alpha (or a procedural rule) cuts the surface
-    float alpha_cutoff = 0.01f; // texels with alpha below this are holes
+    vec3<float> colour{0.7f, 0.7f, 0.7f}; // linear base colour
+    int texture = -1;                      // base-colour texture: index into compiled_scene::textures, or -1
+    alpha_mode alpha = alpha_mode::opaque; // mask: texels whose alpha < alpha_cutoff are holes (or a
+                                           // procedural rule cuts the surface)
+    float alpha_cutoff = 0.5f;             // glTF's default
 };
 
 struct compiled_mesh {
@@ -112,14 +119,14 @@ struct compiled_scene {
     std::vector<texture2d<vec4<float>>> textures;
     std::vector<compiled_group> groups;
 
-    int levels = 0;                   // see the file comment
+    int levels = 0;                    // which BVH is the root: see the file comment and visit_root
     std::vector<placement> top_meshes; // levels 1
     std::vector<placement> top_groups; // levels 2
 
     std::vector<mesh_instance> top_mesh_instances;   // built from top_meshes
     std::vector<group_instance> top_group_instances; // built from top_groups
-    bvh<mesh_instance> top1;
-    bvh<group_instance> top2;
+    bvh<mesh_instance> top_meshes_bvh;  // levels 1: the root, over top_mesh_instances
+    bvh<group_instance> top_groups_bvh; // levels 2: the root, over top_group_instances
 
     // World-space camera and lights of the scene, when it has them. camera_file and camera_node
     // name the camera in messages (its file, and "camera 'main'" or "camera #12").
@@ -166,33 +173,40 @@ struct compiled_scene {
         top_group_instances.clear();
         if (levels == 1) {
             top_mesh_instances = mesh_instances(top_meshes);
-            top1 = build_binned_sah(top_mesh_instances, options);
+            top_meshes_bvh = build_binned_sah(top_mesh_instances, options);
         } else if (levels == 2) {
             for (std::size_t k = 0; k < top_groups.size(); ++k)
                 top_group_instances.emplace_back(groups.at(top_groups[k].index).accel, top_groups[k].transform,
                                                  std::uint32_t(k));
-            top2 = build_binned_sah(top_group_instances, options);
+            top_groups_bvh = build_binned_sah(top_group_instances, options);
         }
     }
 
+    // Calls f(root) with the BVH every query starts from, by level: meshes[0].accel (a
+    // bvh<triangle>) at 0, top_meshes_bvh (a bvh<mesh_instance>) at 1, top_groups_bvh (a
+    // bvh<group_instance>) at 2; returns what f returns (the same type for the three). The one
+    // place that picks the root: the queries below, the command line, the benchmarks and the
+    // batch queries (f calls them on &root, &root + 1) all go through it. Needs a built scene.
+    template <typename F>
+    inline decltype(auto) visit_root(F&& f) const {
+        if (levels == 2) return f(top_groups_bvh);
+        if (levels == 1) return f(top_meshes_bvh);
+        return f(meshes[0].accel);
+    }
+
     aabb bounds() const {
-        if (levels == 2) return top2.bounds();
-        if (levels == 1) return top1.bounds();
-        return meshes.empty() ? aabb{} : meshes[0].accel.bounds();
+        if (levels == 0 && meshes.empty()) return aabb{};
+        return visit_root([](auto const& root) { return root.bounds(); });
     }
 
     template <typename I>
-    basic_hit_record<float> closest_hit(ray const& r, I& isect) const {
-        if (levels == 2) return canopy::closest_hit(r, &top2, &top2 + 1, isect);
-        if (levels == 1) return canopy::closest_hit(r, &top1, &top1 + 1, isect);
-        return canopy::closest_hit(r, &meshes[0].accel, &meshes[0].accel + 1, isect);
+    inline basic_hit_record<float> closest_hit(ray const& r, I& isect) const {
+        return visit_root([&](auto const& root) { return canopy::closest_hit(r, &root, &root + 1, isect); });
     }
 
     template <typename I>
-    basic_hit_record<float> any_hit(ray const& r, I& isect) const {
-        if (levels == 2) return canopy::any_hit(r, &top2, &top2 + 1, isect);
-        if (levels == 1) return canopy::any_hit(r, &top1, &top1 + 1, isect);
-        return canopy::any_hit(r, &meshes[0].accel, &meshes[0].accel + 1, isect);
+    inline basic_hit_record<float> any_hit(ray const& r, I& isect) const {
+        return visit_root([&](auto const& root) { return canopy::any_hit(r, &root, &root + 1, isect); });
     }
 
     // The user id of the instance a hit lies in: the innermost placement made by an instance node
@@ -245,7 +259,7 @@ struct compiled_scene {
         if (dot(n, r.direction) > 0.0f) n = -n;
         s.normal = n;
         material const& mat = material_of(hr);
-        s.albedo = mat.albedo;
+        s.albedo = mat.colour;
         if (mat.texture >= 0) {
             vec4<float> const texel = tex2D(textures[std::size_t(mat.texture)], uv(hr));
             s.albedo = s.albedo * vec3<float>(texel.x, texel.y, texel.z);
@@ -257,6 +271,89 @@ struct compiled_scene {
         float const up = r.direction.y / length(r.direction);
         float const t = std::sqrt(std::clamp(up, 0.0f, 1.0f));
         return lerp(sky_horizon, sky_zenith, t);
+    }
+
+    // The camera to render the scene with, for images of aspect width / height: the scene's own,
+    // else one looking at the middle of the bounding box from above and in front (+z), far enough
+    // to see all of it (45° field of view). `name` names the scene in errors (its file, or
+    // gen:...). Throws scene_error when the values give no camera (pinhole_camera::look_at_problem),
+    // naming the scene's camera (camera_file, camera_node), or for the automatic one "NAME:
+    // automatic camera" with bounds that are empty, beyond float range or without extent.
+    pinhole_camera render_camera(float aspect, std::string const& name = {}) const {
+        if (camera)
+            return checked_camera(camera_file.empty() ? name : camera_file, camera_node.empty() ? "camera" : camera_node,
+                                  camera->eye, camera->target, camera->up, camera->fovy_degrees, aspect);
+        aabb const box = bounds();
+        auto const c = center(box);
+        float const extent = length(diagonal(box));
+        vec3<float> const eye = c + vec3<float>(0.35f, 0.45f, 1.0f) * extent;
+        std::string const where = "automatic camera";
+        std::string const bounds_text = "the scene's bounds " + text(box.min) + " .. " + text(box.max);
+        if (!all_finite(box.min) || !all_finite(box.max) || !(box.min.x <= box.max.x) || !(box.min.y <= box.max.y) ||
+            !(box.min.z <= box.max.z) || !std::isfinite(extent) || !all_finite(eye))
+            throw scene_error(name, where, bounds_text + " are empty or beyond float range: give the scene a camera");
+        if (!(extent > 0.0f))
+            throw scene_error(name, where,
+                              bounds_text + " have no extent in float (a point, or a scene scaled to almost nothing): "
+                                            "give the scene a camera");
+        return checked_camera(name, where, eye, c, {0.0f, 1.0f, 0.0f}, 45.0f, aspect);
+    }
+
+    // The lights of the path kernel (light_options): the scene's first directional light is the
+    // sun and its first point light the point light; without a point light, one stands above the
+    // middle of the bounding box (0.35 of its diagonal up), its intensity (1, 0.8, 0.6) times
+    // 0.05 · diagonal². Throws scene_error, naming the scene by `name`, for a light whose values
+    // give no finite light, or bounds too large for the default point light.
+    light_options render_lights(std::string const& name = {}) const {
+        light_options light;
+        bool sun = false, point = false;
+        for (auto const& l : lights) {
+            if (l.kind == light_data::directional && !sun) {
+                light.sun_direction = normalize(l.direction);
+                if (!all_finite(light.sun_direction) || !all_finite(l.colour))
+                    throw scene_error(name, "directional light",
+                                      "direction " + text(l.direction) + " or colour " + text(l.colour) +
+                                          " gives no finite light");
+                light.sun_colour = l.colour;
+                sun = true;
+            } else if (l.kind == light_data::point && !point) {
+                if (!all_finite(l.position) || !all_finite(l.colour))
+                    throw scene_error(name, "point light",
+                                      "position " + text(l.position) + " or intensity " + text(l.colour) + " is not finite");
+                light.point_position = l.position;
+                light.point_intensity = l.colour;
+                point = true;
+            }
+        }
+        light.point_light = true;
+        if (!point) {
+            aabb const box = bounds();
+            float const extent = length(diagonal(box));
+            light.point_position = center(box) + vec3<float>(0.0f, 0.35f * extent, 0.0f);
+            light.point_intensity = vec3<float>(1.0f, 0.8f, 0.6f) * (0.05f * extent * extent);
+            if (!all_finite(light.point_position) || !all_finite(light.point_intensity))
+                throw scene_error(name, "",
+                                  "the bounding box (diagonal " + text(extent) +
+                                      ") is beyond float range for the default point light of the path kernel: give "
+                                      "the scene a point light");
+        }
+        return light;
+    }
+
+private:
+    static std::string text(float f) {
+        char buffer[32];
+        std::snprintf(buffer, sizeof buffer, "%g", double(f));
+        return buffer;
+    }
+    static std::string text(vec3<float> v) { return "(" + text(v.x) + ", " + text(v.y) + ", " + text(v.z) + ")"; }
+
+    // look_at, or a scene_error naming the camera when the values give none.
+    static pinhole_camera checked_camera(std::string const& file, std::string const& where, vec3<float> eye,
+                                         vec3<float> target, vec3<float> up, float fovy, float aspect) {
+        std::string const problem = pinhole_camera::look_at_problem(eye, target, up, fovy, aspect);
+        if (!problem.empty()) throw scene_error(file, where, problem);
+        return pinhole_camera::look_at(eye, target, up, fovy, aspect);
     }
 };
 
@@ -272,7 +369,7 @@ struct texture_alpha_mask : basic_intersector<texture_alpha_mask> {
 
     inline bool keeps(basic_hit_record<float> const& hr) const {
         material const& mat = scene->material_of(hr);
-        return !(mat.alpha_mask && mat.texture >= 0) ||
+        return !(mat.alpha == alpha_mode::mask && mat.texture >= 0) ||
                tex2D(scene->textures[std::size_t(mat.texture)], scene->uv(hr)).w >= mat.alpha_cutoff;
     }
 
@@ -284,7 +381,7 @@ struct texture_alpha_mask : basic_intersector<texture_alpha_mask> {
 struct procedural_alpha_mask : basic_intersector<procedural_alpha_mask> {
     template <typename Ray>
     bool filter(Ray const&, basic_hit_record<float> const& hr) const {
-        return !scene->material_of(hr).alpha_mask || keeps(scene->uv(hr));
+        return scene->material_of(hr).alpha != alpha_mode::mask || keeps(scene->uv(hr));
     }
 
     // The rule: with d = 2·|uv − (0.5, 0.5)|, keep where d < 1 and frac(5d) < 0.6.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes assets/tree.png: the RGBA billboard texture of the demo scene (128x128).
+"""Writes assets/tree.png: the RGBA billboard texture of the JSON example scene (128x128).
 
 A tree silhouette (trunk and a crown of overlapping leaf discs) on a fully transparent
 background whose colour is kept dark purple, so that a renderer that ignores alpha shows

@@ -16,7 +16,8 @@
 #include <vector>
 #include <tbb/global_control.h>
 
-import canopy.billboard_forest;
+import canopy.scene;
+import canopy.plugins.procedural;
 
 namespace {
 
@@ -60,7 +61,7 @@ enum class front_kind { none, textured, procedural };
 canopy::compiled_scene make_layered_scene(front_kind front) {
     canopy::compiled_scene s;
     s.materials = {canopy::material{back_albedo},
-                   canopy::material{{1.0f, 1.0f, 1.0f}, front == front_kind::textured ? 0 : -1, true, 0.01f}};
+                   canopy::material{{1.0f, 1.0f, 1.0f}, front == front_kind::textured ? 0 : -1, canopy::alpha_mode::mask, 0.01f}};
     s.textures.emplace_back(2, 1, std::vector<vec4<float>>{transparent_texel, opaque_texel},
                             canopy::sampler{canopy::filter_mode::nearest, canopy::address_mode::clamp});
     s.meshes.push_back(make_quad(back_half, back_z, 0));
@@ -123,28 +124,18 @@ canopy::framebuffer render_primary(canopy::compiled_scene const& s, I const& ise
 
 // ---- the demo forest, small -------------------------------------------------------------
 
-// An RGBA "tree": opaque inside a triangle pointing up, transparent around it.
-canopy::texture2d<vec4<float>> tree_texture() {
-    int const n = 32;
-    std::vector<vec4<float>> texels;
-    for (int j = 0; j < n; ++j)
-        for (int i = 0; i < n; ++i) {
-            float const u = (float(i) + 0.5f) / float(n), v = (float(j) + 0.5f) / float(n);
-            bool const leaf = std::fabs(u - 0.5f) < 0.45f * v && v < 0.85f;
-            bool const trunk = std::fabs(u - 0.5f) < 0.06f && v >= 0.85f;
-            texels.push_back(leaf ? vec4<float>(0.1f, 0.6f, 0.2f, 1.0f)
-                                  : trunk ? vec4<float>(0.4f, 0.25f, 0.1f, 1.0f) : vec4<float>(0.0f, 0.0f, 0.0f, 0.0f));
-        }
-    return {n, n, std::move(texels), {canopy::filter_mode::bilinear, canopy::address_mode::clamp}};
+// The demo forest (the procedural plugin's billboard_forest), small, compiled as the demo is.
+canopy::compiled_scene small_forest() {
+    canopy::registry r;
+    canopy::register_procedural_plugin(r);
+    canopy::scene s;
+    r.generate(s, "billboard_forest", {{"billboards", "60"}, {"spheres", "5"}, {"seed", "7"}, {"texture_size", "32"}});
+    return canopy::compile(s);
 }
 
-canopy::billboard_forest small_forest() {
-    return canopy::make_billboard_forest(tree_texture(), {.billboards = 60, .spheres = 5, .seed = 7});
-}
-
-canopy::pinhole_camera forest_camera(canopy::billboard_forest const& forest) {
-    return canopy::pinhole_camera::look_at(forest.camera_eye, forest.camera_target, {0.0f, 1.0f, 0.0f},
-                                           forest.camera_fovy, float(width) / float(height));
+// The forest's own camera.
+canopy::pinhole_camera forest_camera(canopy::compiled_scene const& forest) {
+    return forest.render_camera(float(width) / float(height));
 }
 
 } // namespace
@@ -305,9 +296,8 @@ struct test_counter {
 } // namespace
 
 TEST_CASE("the heat map's total equals the counting intersector's totals") {
-    auto const forest = small_forest();
-    auto const& scene = forest.scene;
-    auto const camera = forest_camera(forest);
+    auto const scene = small_forest();
+    auto const camera = forest_camera(scene);
 
     // The cost image: per pixel the paper's bvh_costs counts (canopy::cost_counter), (boxes, triangles, sum).
     canopy::framebuffer costs(width, height);
@@ -376,11 +366,11 @@ namespace {
 enum class kernel_kind { primary, ao, path };
 
 // The forest rendered with the texture alpha mask by one kernel, under `threads` worker threads.
-canopy::framebuffer render_forest(canopy::billboard_forest const& forest, kernel_kind kernel, int threads,
+canopy::framebuffer render_forest(canopy::compiled_scene const& forest, kernel_kind kernel, int threads,
                                   int tile_size = 16) {
     tbb::global_control const limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
     canopy::texture_alpha_mask mask;
-    mask.scene = &forest.scene;
+    mask.scene = &forest;
     auto const camera = forest_camera(forest);
     int const spp = kernel == kernel_kind::path ? 2 : 1;
     canopy::framebuffer fb(width, height);
@@ -391,9 +381,9 @@ canopy::framebuffer render_forest(canopy::billboard_forest const& forest, kernel
             float const jx = spp > 1 ? rng.next() : 0.5f, jy = spp > 1 ? rng.next() : 0.5f;
             canopy::ray const r = camera.primary_ray(float(x) + jx, float(y) + jy, width, height);
             switch (kernel) {
-            case kernel_kind::primary: sum = sum + canopy::primary_kernel(forest.scene, r, mask); break;
-            case kernel_kind::ao: sum = sum + canopy::ao_kernel(forest.scene, r, mask, rng, 8, 2.0f); break;
-            case kernel_kind::path: sum = sum + canopy::path_kernel(forest.scene, r, mask, rng, 3); break;
+            case kernel_kind::primary: sum = sum + canopy::primary_kernel(forest, r, mask); break;
+            case kernel_kind::ao: sum = sum + canopy::ao_kernel(forest, r, mask, rng, 8, 2.0f); break;
+            case kernel_kind::path: sum = sum + canopy::path_kernel(forest, r, mask, rng, 3); break;
             }
         }
         return sum * (1.0f / float(spp));

@@ -1,8 +1,11 @@
 // Tests of canopy.plugins.bench: .inst files written here load into one shared mesh and one
 // instance node per matrix line (counts and transforms as written), and compile() traces them
-// exactly as Canopy's direct bench path does (the mesh BVH, instances and top-level BVH built by
-// hand as `canopy trace` builds them): same t, u, v, prim_id and inst_id, ray by ray. The strict
-// .obj subset loads under the plugin name "bench". Malformed files (written here, and broken
+// exactly as a reference built by hand from the reader's output (the mesh BVH, instances with id
+// = matrix line, a top-level BVH over them): same t, u, v, prim_id and inst_id, ray by ray. With
+// keep_single_instance (what `canopy trace` compiles with), hits report `inst` as the formats say:
+// the matrix line, also for a single identity instance, and none for an .obj, which costs the
+// same tests per ray as its mesh BVH traced alone. The strict .obj subset loads under the plugin
+// name "bench". Malformed files (written here, and broken
 // models from Debian's assimp-testmodels) give scene errors naming the file at fault and the line.
 #include <catch2/catch.hpp>
 
@@ -155,7 +158,7 @@ TEST_CASE(".inst through compile() gives the direct bench path's closest hits, r
     auto const r = bench_registry();
     canopy::compiled_scene const c = canopy::compile(canopy::load_scene(file, r));
 
-    // The direct path of `canopy trace`: mesh BVH, instances with id = line index, top BVH.
+    // The reference: mesh BVH, instances with id = line index, top BVH, built by hand.
     auto const inst = canopy::read_bench_inst(file);
     auto const mesh = canopy::build_binned_sah(inst.mesh.triangles);
     std::vector<canopy::instance<canopy::bvh<canopy::triangle>>> instances;
@@ -200,6 +203,69 @@ TEST_CASE(".inst through compile() gives the direct bench path's closest hits, r
     }
     CHECK(same_id == rays.size());
     CHECK(shifted > 0);
+}
+
+TEST_CASE("keep_single_instance: hits report inst as the bench formats say, with no extra level for an .obj") {
+    temp_folder const tmp("canopy_scene_bench_test");
+    fs::path const& folder = tmp.path;
+    std::size_t triangles = 0;
+    write(folder / "sphere.obj", sphere_obj(triangles));
+    write(folder / "one.inst", "mesh sphere.obj\n1 0 0 0  0 1 0 0  0 0 1 0\n");
+    write(folder / "moved.inst", "mesh sphere.obj\n1 0 0 0  0 1 0 0  0 0 1 0\n1 0 0 0  0 1 0 0  0 0 1 -5\n");
+    auto const r = bench_registry();
+    auto const compiled = [&](fs::path const& file, bool keep) {
+        canopy::scene s;
+        r.load(s, file, s.root(), "bench");
+        return canopy::compile(s, {.name = file.string(), .keep_single_instance = keep});
+    };
+    canopy::ray const down_z{{0.1f, 0.2f, 10.0f}, 0.0f, {0.0f, 0.0f, -1.0f}, 1e30f};      // hits the sphere at the origin
+    canopy::ray const behind{{0.1f, 0.2f, -2.5f}, 0.0f, {0.0f, 0.0f, -1.0f}, 1e30f};      // only the one at z = -5
+    canopy::default_intersector isect;
+
+    // One identity instance: inst 0 (its matrix line) with the option, none without it (levels 0).
+    canopy::compiled_scene const kept = compiled(folder / "one.inst", true);
+    canopy::compiled_scene const plain = compiled(folder / "one.inst", false);
+    CHECK(kept.levels == 1);
+    CHECK(plain.levels == 0);
+    std::size_t kept_decisions = 0;
+    for (auto const& d : kept.statistics.decisions) kept_decisions += d.find("keep_single_instance") != std::string::npos;
+    CHECK(kept_decisions == 1);
+    auto const a = kept.closest_hit(down_z, isect);
+    auto const b = plain.closest_hit(down_z, isect);
+    REQUIRE(a.hit);
+    REQUIRE(b.hit);
+    CHECK(a.inst_id == 0);
+    CHECK(b.inst_id == canopy::invalid_id);
+    CHECK((a.t == b.t && a.u == b.u && a.v == b.v && a.prim_id == b.prim_id)); // the identity reuses the ray
+    CHECK(a.t == Approx(9.0).margin(0.25));
+
+    // Two instances: each hit names its matrix line, with or without the option.
+    canopy::compiled_scene const two = compiled(folder / "moved.inst", true);
+    CHECK(two.levels == 1);
+    CHECK(two.closest_hit(down_z, isect).inst_id == 0);
+    auto const far = two.closest_hit(behind, isect);
+    REQUIRE(far.hit);
+    CHECK(far.inst_id == 1);
+    CHECK(far.t == Approx(1.5).margin(0.25)); // the sphere at z = -5 has its top at z = -4
+
+    // An .obj has no instances: no top level, inst none, and the very tests of its mesh BVH alone.
+    canopy::compiled_scene const mesh = compiled(folder / "sphere.obj", true);
+    CHECK(mesh.levels == 0);
+    auto const direct = canopy::build_binned_sah(canopy::read_bench_obj(folder / "sphere.obj").triangles);
+    std::size_t same_costs = 0, hits = 0;
+    auto const rays = random_rays(3, 500);
+    for (auto const& ray : rays) {
+        canopy::cost_counter compiled_costs, direct_costs;
+        auto const hit = mesh.closest_hit(ray, compiled_costs);
+        canopy::closest_hit(ray, &direct, &direct + 1, direct_costs);
+        same_costs += compiled_costs.num_boxes == direct_costs.num_boxes && compiled_costs.num_tris == direct_costs.num_tris;
+        if (hit.hit) {
+            ++hits;
+            CHECK(hit.inst_id == canopy::invalid_id);
+        }
+    }
+    CHECK(same_costs == rays.size());
+    CHECK(hits > 20);
 }
 
 TEST_CASE("bench .obj loads the strict subset: prim_id is the f line order") {

@@ -310,15 +310,15 @@ void check_instancing_scene(canopy::scene const& s) {
         auto const& mat = c.materials[std::size_t(m.material)];
         if (m.name == "backdrop_quad") {
             saw_red = true;
-            CHECK(mat.albedo.x == 0.8f);
-            CHECK(mat.albedo.y == 0.2f);
-            CHECK(mat.albedo.z == 0.1f);
-            CHECK_FALSE(mat.alpha_mask);
+            CHECK(mat.colour.x == 0.8f);
+            CHECK(mat.colour.y == 0.2f);
+            CHECK(mat.colour.z == 0.1f);
+            CHECK(mat.alpha == canopy::alpha_mode::opaque);
             CHECK(mat.texture < 0);
         }
         if (m.name == "masked_quad") {
             saw_mask = true;
-            CHECK(mat.alpha_mask);
+            CHECK(mat.alpha == canopy::alpha_mode::mask);
             CHECK(mat.alpha_cutoff == 0.5f);
             REQUIRE(mat.texture >= 0);
             auto const& tex = c.textures[std::size_t(mat.texture)];

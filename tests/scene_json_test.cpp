@@ -218,7 +218,7 @@ TEST_CASE("json: a file placed by 10^5 mesh nodes is loaded once and shared: one
     CHECK(c.statistics.placements == std::size_t(rows * per_row));
     REQUIRE(c.meshes.size() == 1);
     CHECK(c.meshes[0].accel.primitive_count() == 2); // the quad's BVH, built once
-    CHECK(c.top1.primitive_count() == std::size_t(rows * per_row));
+    CHECK(c.top_meshes_bvh.primitive_count() == std::size_t(rows * per_row));
 }
 
 TEST_CASE("json: mesh files nested through scene files are loaded once each, placements multiply at compile time") {

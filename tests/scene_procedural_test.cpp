@@ -1,8 +1,9 @@
 // Tests of canopy.plugins.procedural: each generator's counts against the numbers worked out by
 // hand from its parameters, the icosphere's closedness (every edge in exactly two faces, once in
 // each direction), determinism in the seed, errors naming the generator and the parameter, the
-// billboard forest compiled with one BLAS per mesh (its placements equal to those of the demo
-// module canopy.billboard_forest, and its alpha mask cutting rays), and the `procedural` node type.
+// billboard forest (the demo scene) compiled with one BLAS per mesh, its placements laid out as
+// its comment says (checked from the transforms alone), its alpha mask cutting rays, and the
+// `procedural` node type.
 #include <catch2/catch.hpp>
 
 #include <array>
@@ -19,7 +20,6 @@
 
 import canopy.scene;
 import canopy.plugins.procedural;
-import canopy.billboard_forest;
 
 #include "scene_support.hpp"
 
@@ -221,27 +221,41 @@ TEST_CASE("billboard_forest compiles to one top level with one BLAS per mesh and
     CHECK(c.camera->eye.z == 17.0f);
 }
 
-TEST_CASE("billboard_forest places everything where the demo module canopy.billboard_forest does") {
+TEST_CASE("billboard_forest places the ground, then the spheres on it, then billboards facing the camera") {
     auto const r = procedural_registry();
     canopy::scene s;
     r.generate(s, "billboard_forest", {{"seed", "5"}});
     canopy::compiled_scene const c = canopy::compile(s, {.plugins = &r});
-    canopy::image_data const tree = canopy::make_tree_texture(16);
-    canopy::billboard_forest const demo = canopy::make_billboard_forest(
-        canopy::texture2d<canopy::vec4<float>>(tree.width, tree.height, tree.texels), {.billboards = 160, .spheres = 7, .seed = 5});
-    REQUIRE(c.top_meshes.size() == demo.scene.top_meshes.size());
-    std::size_t same = 0;
-    for (std::size_t k = 0; k < c.top_meshes.size(); ++k) {
-        auto const& a = c.top_meshes[k];
-        auto const& b = demo.scene.top_meshes[k];
-        bool const equal = a.index == b.index && a.transform.translation.x == b.transform.translation.x &&
-                           a.transform.translation.z == b.transform.translation.z &&
-                           a.transform.linear.col0.x == b.transform.linear.col0.x &&
-                           a.transform.linear.col0.z == b.transform.linear.col0.z &&
-                           a.transform.linear.col1.y == b.transform.linear.col1.y;
-        same += equal;
+    REQUIRE(c.camera.has_value());
+    vec3<float> const eye = c.camera->eye;
+    REQUIRE(c.top_meshes.size() == 1 + 7 + 160);
+    CHECK(c.meshes[0].name == "ground");
+    CHECK(c.meshes[1].name == "sphere");
+    CHECK(c.meshes[2].name == "billboard");
+    CHECK(c.top_meshes[0].index == 0);
+    CHECK(c.top_meshes[0].transform.is_identity());
+    std::size_t spheres_on_ground = 0, billboards_facing = 0;
+    for (std::size_t k = 1; k < c.top_meshes.size(); ++k) {
+        auto const& p = c.top_meshes[k];
+        auto const& m = p.transform.linear;
+        vec3<float> const at = p.transform.translation;
+        if (k <= 7) {
+            // A uniform scale r in [0.6, 1.6], the unit sphere's centre lifted by r: it stands on y = 0.
+            float const radius = m.col0.x;
+            spheres_on_ground += p.index == 1 && radius >= 0.6f && radius <= 1.6f && m.col1.y == radius &&
+                                 m.col2.z == radius && at.y == radius && at.x >= -9.0f && at.x <= 9.0f &&
+                                 at.z >= -14.0f && at.z <= 2.0f;
+            continue;
+        }
+        // The quad's normal (+z of the prototype) turned about y towards the eye; height in [1.8, 3.6].
+        double const nx = m.col2.x, nz = m.col2.z;
+        double const ex = double(eye.x) - at.x, ez = double(eye.z) - at.z;
+        double const cosine = (nx * ex + nz * ez) / (std::hypot(nx, nz) * std::hypot(ex, ez));
+        billboards_facing += p.index == 2 && cosine > 1.0 - 1e-6 && m.col2.y == 0.0f && m.col1.y >= 1.8f &&
+                             m.col1.y <= 3.6f && at.y == 0.0f && at.x >= -16.0f && at.x <= 16.0f;
     }
-    CHECK(same == c.top_meshes.size());
+    CHECK(spheres_on_ground == 7);
+    CHECK(billboards_facing == 160);
 }
 
 TEST_CASE("the billboards' alpha mask lets rays through transparent texels only") {

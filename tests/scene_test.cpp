@@ -13,6 +13,8 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 #include <sys/stat.h>
 
@@ -198,7 +200,7 @@ TEST_CASE("a single untransformed mesh is traced without a top level") {
     CHECK(c.statistics.identity_transform_nodes == 1);
     CHECK(decided(c, "no top-level BVH"));
     CHECK(c.top_mesh_instances.empty());
-    CHECK(c.top1.empty());
+    CHECK(c.top_meshes_bvh.empty());
     check_against_brute_force(c, 300, 1);
     // Bit for bit what the mesh BVH gives when traced directly.
     auto const tris = canopy::make_icosphere(2);
@@ -367,7 +369,7 @@ TEST_CASE("the alpha-mask intersector is needed only when a placed mesh has a ma
     CHECK(c.statistics.alpha_mask_needed);
     CHECK(c.statistics.masked_materials_used == 1);
     REQUIRE(c.textures.size() == 1);
-    CHECK(c.materials[std::size_t(mat) + 1].alpha_mask);
+    CHECK(c.materials[std::size_t(mat) + 1].alpha == canopy::alpha_mode::mask);
     CHECK(c.materials[std::size_t(mat) + 1].texture == 0);
     CHECK(c.meshes[0].material == mat + 1);
 }
@@ -677,4 +679,143 @@ TEST_CASE("compile() builds the mesh BVHs at the quality of its options, automat
     CHECK(references > tris.size());
     CHECK(canopy::compute_stats(high.meshes[0].accel).sah_cost < canopy::compute_stats(fast.meshes[0].accel).sah_cost);
     check_against_brute_force(high, 300, 7);
+}
+
+// ---- compiled_scene: the root, the camera and the lights --------------------------------------
+
+TEST_CASE("visit_root hands queries the BVH of the scene's level: the mesh, mesh instances or group instances") {
+    // Levels 0: one untransformed mesh; 1: the mesh moved; 2: instances of a two-mesh subtree.
+    canopy::scene one;
+    one.add_mesh_node(one.root(), one.add_mesh(sphere("ball")));
+    canopy::scene moved;
+    moved.add_mesh_node(moved.add_transform(moved.root(), translate(3, 0, 0)), moved.add_mesh(sphere("ball")));
+    canopy::scene grouped;
+    auto const ball = grouped.add_mesh(sphere("ball"));
+    node_id const pair = grouped.add_group(canopy::no_node, "pair");
+    grouped.add_mesh_node(pair, ball);
+    grouped.add_mesh_node(grouped.add_transform(pair, translate(0, 3, 0)), ball);
+    grouped.add_instance(grouped.root(), pair, translate(3, 0, 0), 0);
+    grouped.add_instance(grouped.root(), pair, translate(-3, 0, 0), 1);
+
+    struct expected_root {
+        canopy::scene const* graph;
+        int level;
+        float centre_x; // of the root's bounds, placed by hand above
+    };
+    for (auto const& [graph, level, centre_x] :
+         {expected_root{&one, 0, 0.0f}, expected_root{&moved, 1, 3.0f}, expected_root{&grouped, 2, 0.0f}}) {
+        INFO("level " << level);
+        auto const c = canopy::compile(*graph);
+        REQUIRE(c.levels == level);
+        // Which object, and of which type, the root is.
+        auto const [root, kind] = c.visit_root([](auto const& bvh) {
+            using type = std::decay_t<decltype(bvh)>;
+            int const k = std::is_same_v<type, canopy::bvh<canopy::triangle>>    ? 0
+                          : std::is_same_v<type, canopy::bvh<canopy::mesh_instance>> ? 1
+                          : std::is_same_v<type, canopy::bvh<canopy::group_instance>> ? 2
+                                                                                     : -1;
+            return std::pair{static_cast<void const*>(&bvh), k};
+        });
+        CHECK(kind == level);
+        void const* const expected = level == 0   ? static_cast<void const*>(&c.meshes[0].accel)
+                                     : level == 1 ? static_cast<void const*>(&c.top_meshes_bvh)
+                                                  : static_cast<void const*>(&c.top_groups_bvh);
+        CHECK(root == expected);
+        // bounds() and the queries go through it: the centre of the placed spheres, and a ray down
+        // onto the sphere placed at x = centre_x + 3 (levels 1, 2) or at the origin (level 0).
+        CHECK(canopy::center(c.bounds()).x == Approx(centre_x).margin(1e-5));
+        float const x = level == 0 ? 0.0f : 3.0f;
+        canopy::default_intersector isect;
+        auto const hit = c.closest_hit(canopy::ray{{x, 10, 0}, 0.0f, {0, -1, 0}, INFINITY}, isect);
+        REQUIRE(hit.hit);
+        CHECK(hit.t == Approx(level == 2 ? 10.0 - 4.0 : 9.0).margin(0.1));
+        CHECK(hit.inst_id == (level == 0 ? canopy::invalid_id : 0u));
+        CHECK(c.any_hit(canopy::ray{{x, 10, 0}, 0.0f, {0, -1, 0}, INFINITY}, isect).hit);
+    }
+}
+
+TEST_CASE("render_camera: the scene's camera as placed, else one from above and in front of the bounds") {
+    float const half_height = float(std::tan(22.5 * 3.14159265358979323846 / 180.0)); // fovy 45°
+    canopy::scene s;
+    // One triangle spanning the box (-1, -2, -3) .. (1, 2, 3): centre 0, diagonal √56.
+    canopy::mesh_data m;
+    m.positions = {{-1, -2, -3}, {1, 2, 3}, {1, -2, 3}};
+    m.triangles = {{0, 1, 2}};
+    s.add_mesh_node(s.root(), s.add_mesh(std::move(m)));
+
+    auto const automatic = canopy::compile(s, {.name = "box.json"}).render_camera(1.0f, "box.json");
+    double const diagonal = std::sqrt(56.0);
+    CHECK(automatic.eye.x == Approx(0.35 * diagonal).epsilon(1e-6));
+    CHECK(automatic.eye.y == Approx(0.45 * diagonal).epsilon(1e-6));
+    CHECK(automatic.eye.z == Approx(1.0 * diagonal).epsilon(1e-6));
+    double const to_centre = std::sqrt(0.35 * 0.35 + 0.45 * 0.45 + 1.0);
+    CHECK(automatic.forward.x == Approx(-0.35 / to_centre).epsilon(1e-5));
+    CHECK(automatic.forward.y == Approx(-0.45 / to_centre).epsilon(1e-5));
+    CHECK(automatic.forward.z == Approx(-1.0 / to_centre).epsilon(1e-5));
+    CHECK(canopy::length(automatic.up) == Approx(half_height).epsilon(1e-5));
+
+    // The scene's camera, 5 up a transform: looking down -z from (0, 5, 5), aspect 2.
+    s.add_camera(s.add_transform(s.root(), translate(0, 5, 0)), {.eye = {0, 0, 5}, .target = {0, 0, 0}}, "cam");
+    auto const c = canopy::compile(s, {.name = "view.json"});
+    auto const camera = c.render_camera(2.0f, "other name");
+    CHECK(camera.eye.x == 0.0f);
+    CHECK(camera.eye.y == 5.0f);
+    CHECK(camera.eye.z == 5.0f);
+    CHECK(camera.forward.z == -1.0f);
+    CHECK(camera.right.x == Approx(2.0f * half_height).epsilon(1e-6));
+    CHECK(camera.right.y == 0.0f);
+    CHECK(camera.up.y == Approx(half_height).epsilon(1e-6));
+    CHECK(camera.up.x == 0.0f);
+    // Values that give no camera are named by the camera's file and node.
+    CHECK(message_of([&] { c.render_camera(0.0f, "other name"); }) ==
+          "view.json: camera 'cam': aspect ratio 0 is not a positive number");
+
+    // Bounds beyond float range give no automatic camera.
+    canopy::scene huge;
+    canopy::mesh_data far;
+    far.positions = {{-3e38f, 0, -3e38f}, {3e38f, 0, -3e38f}, {3e38f, 0, 3e38f}};
+    far.triangles = {{0, 1, 2}};
+    huge.add_mesh_node(huge.root(), huge.add_mesh(std::move(far)));
+    CHECK(message_of([&] { canopy::compile(huge).render_camera(1.0f, "huge.json"); }) ==
+          "huge.json: automatic camera: the scene's bounds (-3e+38, 0, -3e+38) .. (3e+38, 0, 3e+38) are empty or beyond "
+          "float range: give the scene a camera");
+}
+
+TEST_CASE("render_lights: the scene's first sun and point light, else a point light above the middle of the bounds") {
+    canopy::scene s;
+    canopy::mesh_data m;
+    m.positions = {{-1, -2, -3}, {1, 2, 3}, {1, -2, 3}};
+    m.triangles = {{0, 1, 2}};
+    s.add_mesh_node(s.root(), s.add_mesh(std::move(m)));
+
+    // Without lights: the default sun, and a point light 0.35 · √56 above the centre (the origin),
+    // of intensity (1, 0.8, 0.6) · 0.05 · 56.
+    canopy::light_options const defaults;
+    auto const lit = canopy::compile(s).render_lights("box.json");
+    CHECK(lit.point_light);
+    CHECK(lit.point_position.x == 0.0f);
+    CHECK(lit.point_position.y == Approx(0.35 * std::sqrt(56.0)).epsilon(1e-6));
+    CHECK(lit.point_position.z == 0.0f);
+    CHECK(lit.point_intensity.x == Approx(2.8).epsilon(1e-5));
+    CHECK(lit.point_intensity.y == Approx(2.24).epsilon(1e-5));
+    CHECK(lit.point_intensity.z == Approx(1.68).epsilon(1e-5));
+    CHECK(lit.sun_direction.y == defaults.sun_direction.y);
+    CHECK(lit.sun_colour.x == defaults.sun_colour.x);
+
+    // The first directional light is the sun (its direction made unit), the first point light the
+    // point light; the second of each is not used.
+    using light = canopy::light_data;
+    s.add_light(s.root(), {.kind = light::directional, .direction = {0, 2, 0}, .colour = {1, 0.5f, 0.25f}});
+    s.add_light(s.root(), {.kind = light::point, .position = {1, 2, 3}, .colour = {4, 5, 6}});
+    s.add_light(s.root(), {.kind = light::directional, .direction = {1, 0, 0}, .colour = {9, 9, 9}});
+    s.add_light(s.root(), {.kind = light::point, .position = {7, 7, 7}, .colour = {9, 9, 9}});
+    auto const own = canopy::compile(s).render_lights("box.json");
+    CHECK(own.sun_direction.x == 0.0f);
+    CHECK(own.sun_direction.y == 1.0f);
+    CHECK(own.sun_direction.z == 0.0f);
+    CHECK(own.sun_colour.y == 0.5f);
+    CHECK(own.point_light);
+    CHECK(own.point_position.z == 3.0f);
+    CHECK(own.point_intensity.x == 4.0f);
+    CHECK(own.point_intensity.z == 6.0f);
 }

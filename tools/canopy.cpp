@@ -18,8 +18,10 @@
 // registered plugin loads (built-in, in CANOPY_PLUGIN_PATH, or given with --plugin FILE), or
 // gen:NAME[:KEY=VALUE,...] for a registered generator, is loaded into the scene graph, compiled
 // (canopy.scene's skip rules) and rendered with the scene's camera and lights when it has them.
-// `canopy trace` reads the benchmark formats (.obj subset: one BVH, no top level; .inst: one shared
-// mesh instanced under a top-level BVH); rays and hits use the benchmark formats too. It traces one
+// `canopy trace` loads the benchmark formats through the bench plugin (canopy.plugins.bench) and
+// compiles them like any scene (.obj subset: one mesh BVH, no top level; .inst: one shared mesh
+// instanced under a top-level BVH, kept for a single instance so that hits report its inst 0:
+// compile_options::keep_single_instance); rays and hits use the benchmark formats too. It traces one
 // ray at a time (--mode single, the default: counted in SIMD operations, the batch queries' packets
 // do more work than their rays alone on most bench scenes, see the README) or through the batch
 // queries (--mode batch: groups of 8 coherent rays as packets); the hit files are the same byte
@@ -68,9 +70,9 @@
 #include <tbb/parallel_for.h>
 import canopy;
 import canopy.bench_formats;
-import canopy.billboard_forest;
 import canopy.image_io;
 import canopy.plugins;
+import canopy.plugins.bench;
 #if CANOPY_WITH_MPI
 import canopy.distributed;
 #endif
@@ -424,43 +426,27 @@ void prepare_folder(std::filesystem::path const& folder) {
         throw output_error(folder.string() + ": the output folder exists and is not a folder");
 }
 
-// Either a single-level scene or a two-level instanced one.
-struct loaded_scene {
-    canopy::bvh<canopy::triangle> mesh;
-    std::vector<canopy::instance<canopy::bvh<canopy::triangle>>> instances;
-    canopy::bvh<canopy::instance<canopy::bvh<canopy::triangle>>> top;
-    bool instanced = false;
-    double build_seconds = 0.0;
+// A scene of the bench formats, loaded by the bench plugin and compiled: the BVH of the .obj's mesh,
+// or the top-level BVH over the .inst's instances (each placement's inst_id is its matrix line).
+struct loaded_bench_scene {
+    canopy::compiled_scene compiled;
+    double build_seconds = 0.0; // compile(): the BVHs and the instances
 };
 
-std::unique_ptr<loaded_scene> load_bench_scene(std::filesystem::path const& path, canopy::build_quality quality) {
-    auto scene = std::make_unique<loaded_scene>();
+std::unique_ptr<loaded_bench_scene> load_bench_scene(std::filesystem::path const& path, canopy::build_quality quality) {
+    auto scene = std::make_unique<loaded_bench_scene>();
     canopy::require_regular_file(path); // a folder or a device is named as such, whatever its extension
     auto const ext = path.extension().string();
     if (ext != ".obj" && ext != ".inst")
         throw canopy::scene_error(path.string(), "", "unknown scene extension " + quote(ext) + " (expected .obj or .inst)");
     step("loading " + path.string());
-    if (ext == ".obj") {
-        auto const mesh = canopy::read_bench_obj(path);
-        if (mesh.triangles.empty()) throw canopy::scene_error(path.string(), "", "holds no triangles: nothing to trace");
-        step("building the BVH of " + path.string());
-        auto const start = clock_type::now();
-        scene->mesh = canopy::build_binned_sah(mesh.triangles, {.quality = quality});
-        scene->build_seconds = seconds_since(start);
-    } else if (ext == ".inst") {
-        auto const inst = canopy::read_bench_inst(path);
-        if (inst.instances.empty()) throw canopy::scene_error(path.string(), "", "holds no instances: nothing to trace");
-        if (inst.mesh.triangles.empty())
-            throw canopy::scene_error(inst.mesh_path.string(), "", "holds no triangles: nothing to trace");
-        step("building the BVHs of " + path.string());
-        auto const start = clock_type::now();
-        scene->mesh = canopy::build_binned_sah(inst.mesh.triangles, {.quality = quality});
-        for (std::size_t k = 0; k < inst.instances.size(); ++k)
-            scene->instances.emplace_back(scene->mesh, inst.instances[k], std::uint32_t(k));
-        scene->top = canopy::build_binned_sah(scene->instances);
-        scene->build_seconds = seconds_since(start);
-        scene->instanced = true;
-    }
+    canopy::registry bench;
+    canopy::register_bench_plugin(bench);
+    canopy::scene graph;
+    bench.load(graph, path, graph.root(), "bench");
+    step("building the BVHs of " + path.string());
+    scene->compiled = canopy::compile(graph, {.bvh = {.quality = quality}, .name = path.string(), .keep_single_instance = true});
+    scene->build_seconds = scene->compiled.statistics.build_seconds;
     return scene;
 }
 
@@ -472,29 +458,24 @@ canopy::bench_hit to_bench_hit(canopy::basic_hit_record<float> const& hr) {
     return {hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v};
 }
 
-// One query over the scene's root: q(first, last) with the BVH of the mesh or of the instances.
-template <typename Query>
-decltype(auto) on_root(loaded_scene const& scene, Query&& q) {
-    return scene.instanced ? q(&scene.top, &scene.top + 1) : q(&scene.mesh, &scene.mesh + 1);
-}
-
 // Rays [first, first + out.size()) into out: one at a time, or through the batch queries
 // (returning how many packets they traced).
 template <typename Isect>
-std::size_t trace_rays(loaded_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> out,
+std::size_t trace_rays(canopy::compiled_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> out,
                        bool closest, bool batch, Isect& isect) {
     if (!batch) {
         for (std::size_t i = 0; i < rays.size(); ++i)
-            out[i] = to_bench_hit(on_root(scene, [&](auto first, auto last) {
-                return closest ? canopy::closest_hit(rays[i], first, last, isect)
-                               : canopy::any_hit(rays[i], first, last, isect);
+            out[i] = to_bench_hit(scene.visit_root([&](auto const& root) {
+                return closest ? canopy::closest_hit(rays[i], &root, &root + 1, isect)
+                               : canopy::any_hit(rays[i], &root, &root + 1, isect);
             }));
         return 0;
     }
     std::array<canopy::basic_hit_record<float>, trace_chunk> records;
     std::span<canopy::basic_hit_record<float>> const got(records.data(), rays.size());
-    auto const stats = on_root(scene, [&](auto first, auto last) {
-        return closest ? canopy::closest_hit(rays, first, last, got, isect) : canopy::any_hit(rays, first, last, got, isect);
+    auto const stats = scene.visit_root([&](auto const& root) {
+        return closest ? canopy::closest_hit(rays, &root, &root + 1, got, isect)
+                       : canopy::any_hit(rays, &root, &root + 1, got, isect);
     });
     for (std::size_t i = 0; i < rays.size(); ++i) out[i] = to_bench_hit(got[i]);
     return stats.packets;
@@ -509,7 +490,7 @@ struct trace_setup {
 
 // Chunks of trace_chunk rays (a multiple of 8: the batch queries' groups are the same whatever
 // the threads and processes), as many at once as the threads take; returns the packets traced.
-std::size_t trace_chunks(loaded_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> hits,
+std::size_t trace_chunks(canopy::compiled_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> hits,
                          trace_setup const& setup) {
     std::size_t const chunks = (rays.size() + trace_chunk - 1) / trace_chunk;
     std::atomic<std::size_t> packets{0};
@@ -546,14 +527,14 @@ double timed_passes(int reps, Pass const& pass) {
     return times.size() % 2 == 1 ? times[mid] : 0.5 * (times[mid - 1] + times[mid]);
 }
 
-void print_trace(loaded_scene const& scene, trace_setup const& setup, std::uint64_t rays, std::uint64_t packets,
+void print_trace(loaded_bench_scene const& scene, trace_setup const& setup, std::uint64_t rays, std::uint64_t packets,
                  std::uint64_t hit_count, double trace_seconds) {
     std::string const timing =
         setup.reps == 0 ? std::string() : fmt::format(" (median of {} after a warm-up pass)", setup.reps);
     std::string const how =
         setup.batch ? fmt::format("batch: {} packets of 8, {} single rays", packets, rays - 8 * packets) : setup.mode;
     fmt::print("build {:.3f} ms at quality {}, trace {} rays ({}) in {:.3f} ms{}: {:.2f} Mrays/s, {} hits\n",
-               scene.build_seconds * 1e3, quality_used(setup.quality, scene.mesh.quality), rays, how,
+               scene.build_seconds * 1e3, quality_used(setup.quality, scene.compiled.meshes[0].accel.quality), rays, how,
                trace_seconds * 1e3, timing, trace_seconds > 0 ? double(rays) / trace_seconds * 1e-6 : 0.0, hit_count);
 }
 
@@ -600,7 +581,7 @@ int run_trace(std::span<char*> all_args) {
     std::vector<canopy::bench_hit> hits(rays.size());
     std::size_t packets = 0;
     double const trace_seconds = timed_passes(reps, [&] {
-        packets = trace_chunks(*scene, rays, hits, setup);
+        packets = trace_chunks(scene->compiled, rays, hits, setup);
     });
     step("writing " + out_path);
     canopy::write_bench_hits(out_path, hits);
@@ -662,7 +643,7 @@ private:
 // hits are the same, byte for byte, as one process's.
 int trace_across_ranks(trace_setup const& setup) {
     std::optional<partial_output> output;
-    std::unique_ptr<loaded_scene> scene;
+    std::unique_ptr<loaded_bench_scene> scene;
     std::uint64_t ray_count = 0;
     on_every_rank([&] {
         if (root_rank()) {
@@ -685,7 +666,7 @@ int trace_across_ranks(trace_setup const& setup) {
         std::vector<canopy::ray> const rays = canopy::read_bench_rays(setup.rays_path, first, count, ray_count);
         std::vector<canopy::bench_hit> hits(rays.size());
         std::uint64_t const counts[2] = {
-            trace_chunks(*scene, rays, hits, setup),
+            trace_chunks(scene->compiled, rays, hits, setup),
             std::uint64_t(std::count_if(hits.begin(), hits.end(), [](auto const& h) { return h.prim != canopy::invalid_id; }))};
         std::string const encoded = canopy::encode_bench_hits(hits);
         std::vector<std::byte> bytes(sizeof counts + encoded.size());
@@ -718,8 +699,6 @@ int trace_across_ranks(trace_setup const& setup) {
 #endif
 
 // ---- render ----------------------------------------------------------------------------------
-
-canopy::light_options lights_of(canopy::compiled_scene const& scene, std::string const& spec);
 
 // The scene as the kernels see it, counting the rays traced.
 struct counting_scene {
@@ -857,7 +836,7 @@ canopy::framebuffer render_kernel(counting_scene const& scene, render_job const&
     }
     // The path kernel adds a point light (the scene's, or one above the middle of the scene) to
     // the sun and the sky.
-    canopy::light_options const light = lights_of(*scene.scene, job.scene_name);
+    canopy::light_options const light = scene.scene->render_lights(job.scene_name);
     if (job.kernel == "path")
         return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
             return canopy::path_kernel(scene, r, isect, rng, 3, light);
@@ -957,14 +936,6 @@ render_result render_image(canopy::compiled_scene const& scene, render_job const
     return result;
 }
 
-canopy::texture2d<canopy::vec4<float>> load_texture(std::filesystem::path const& path) {
-    auto const img = canopy::read_image(path);
-    std::vector<canopy::vec4<float>> texels(std::size_t(img.width) * std::size_t(img.height));
-    for (std::size_t i = 0; i < texels.size(); ++i)
-        texels[i] = {img.pixels[4 * i], img.pixels[4 * i + 1], img.pixels[4 * i + 2], img.pixels[4 * i + 3]};
-    return {img.width, img.height, std::move(texels), {canopy::filter_mode::bilinear, canopy::address_mode::clamp}};
-}
-
 // The registry of built-in plugins, plus shared-library plugins named on the command line.
 canopy::registry& plugin_registry(std::vector<std::string> const& plugin_files) {
     step("loading the plugins of CANOPY_PLUGIN_PATH");
@@ -975,6 +946,9 @@ canopy::registry& plugin_registry(std::vector<std::string> const& plugin_files) 
     }
     return r;
 }
+
+// The scene `canopy render` renders without a SCENE: the paper's Figure 1 forest.
+constexpr char const* demo_scene = "gen:billboard_forest";
 
 // SCENE: a file, or gen:NAME[:KEY=VALUE,...].
 struct loaded_graph {
@@ -1027,47 +1001,6 @@ loaded_graph load_and_compile(std::string const& spec, canopy::registry const& r
     return out;
 }
 
-std::string text(canopy::vec3<float> v) { return fmt::format("({:g}, {:g}, {:g})", v.x, v.y, v.z); }
-
-// The scene's own lights replace the default sun / point light where it has them. The default
-// point light stands above the middle of the scene, its intensity growing with the scene's size.
-canopy::light_options lights_of(canopy::compiled_scene const& scene, std::string const& spec) {
-    canopy::light_options light;
-    bool sun = false, point = false;
-    for (auto const& l : scene.lights) {
-        if (l.kind == canopy::light_data::directional && !sun) {
-            light.sun_direction = canopy::normalize(l.direction);
-            if (!canopy::all_finite(light.sun_direction) || !canopy::all_finite(l.colour))
-                throw canopy::scene_error(spec, "directional light",
-                                          "direction " + text(l.direction) + " or colour " + text(l.colour) +
-                                              " gives no finite light");
-            light.sun_colour = l.colour;
-            sun = true;
-        } else if (l.kind == canopy::light_data::point && !point) {
-            if (!canopy::all_finite(l.position) || !canopy::all_finite(l.colour))
-                throw canopy::scene_error(spec, "point light",
-                                          "position " + text(l.position) + " or intensity " + text(l.colour) +
-                                              " is not finite");
-            light.point_position = l.position;
-            light.point_intensity = l.colour;
-            point = true;
-        }
-    }
-    light.point_light = true;
-    if (!point) {
-        canopy::aabb const box = scene.bounds();
-        float const extent = canopy::length(canopy::diagonal(box));
-        light.point_position = canopy::center(box) + canopy::vec3<float>(0.0f, 0.35f * extent, 0.0f);
-        light.point_intensity = canopy::vec3<float>(1.0f, 0.8f, 0.6f) * (0.05f * extent * extent);
-        if (!canopy::all_finite(light.point_position) || !canopy::all_finite(light.point_intensity))
-            throw canopy::scene_error(spec, "",
-                                      fmt::format("the bounding box (diagonal {:g}) is beyond float range for the "
-                                                  "default point light of the path kernel: give the scene a point light",
-                                                  extent));
-    }
-    return light;
-}
-
 // --size WxH: both whole numbers from 1 to 16384, W·H within the texel limit (the framebuffer
 // holds float RGBA per pixel, as a texture of that size would).
 std::pair<int, int> parse_size(std::string const& text) {
@@ -1082,37 +1015,6 @@ std::pair<int, int> parse_size(std::string const& text) {
         throw usage_error(fmt::format("--size {}x{} is {} pixels, over the limit of {} (--max-texels)", *w, *h,
                                       *w * *h, limit));
     return {int(*w), int(*h)};
-}
-
-// A camera from the scene's values, or a scene_error naming the camera when they give none.
-canopy::pinhole_camera checked_camera(std::string const& file, std::string const& where, canopy::vec3<float> eye,
-                                      canopy::vec3<float> target, canopy::vec3<float> up, float fovy, float aspect) {
-    std::string const problem = canopy::pinhole_camera::look_at_problem(eye, target, up, fovy, aspect);
-    if (!problem.empty()) throw canopy::scene_error(file, where, problem);
-    return canopy::pinhole_camera::look_at(eye, target, up, fovy, aspect);
-}
-
-// The scene's camera, or one looking at the middle of the scene's bounding box from above and
-// in front (+z), far enough to see all of it.
-canopy::pinhole_camera scene_camera(canopy::compiled_scene const& scene, std::string const& spec, float aspect) {
-    if (scene.camera)
-        return checked_camera(scene.camera_file.empty() ? spec : scene.camera_file,
-                              scene.camera_node.empty() ? "camera" : scene.camera_node, scene.camera->eye,
-                              scene.camera->target, scene.camera->up, scene.camera->fovy_degrees, aspect);
-    canopy::aabb const box = scene.bounds();
-    auto const c = canopy::center(box);
-    float const extent = canopy::length(canopy::diagonal(box));
-    canopy::vec3<float> const eye = c + canopy::vec3<float>(0.35f, 0.45f, 1.0f) * extent;
-    std::string const bounds = "the scene's bounds " + text(box.min) + " .. " + text(box.max);
-    if (!canopy::all_finite(box.min) || !canopy::all_finite(box.max) || !(box.min.x <= box.max.x) ||
-        !(box.min.y <= box.max.y) || !(box.min.z <= box.max.z) || !std::isfinite(extent) || !canopy::all_finite(eye))
-        throw canopy::scene_error(spec, "automatic camera",
-                                  bounds + " are empty or beyond float range: give the scene a camera");
-    if (!(extent > 0.0f))
-        throw canopy::scene_error(spec, "automatic camera",
-                                  bounds + " have no extent in float (a point, or a scene scaled to almost nothing): "
-                                           "give the scene a camera");
-    return checked_camera(spec, "automatic camera", eye, c, {0, 1, 0}, 45.0f, aspect);
 }
 
 int run_render(std::span<char*> all_args) {
@@ -1236,32 +1138,30 @@ int run_render(std::span<char*> all_args) {
     std::vector<std::pair<std::string, render_result>> results;
     auto const build_start = clock_type::now();
     if (!scene_path) {
-        std::optional<canopy::billboard_forest> loaded_forest;
+        // The demo: the procedural plugin's billboard_forest, compiled like any scene.
+        std::optional<loaded_graph> loaded_forest;
         on_every_rank([&] {
-            std::filesystem::path const texture = std::filesystem::path(CANOPY_ASSET_DIR) / "tree.png";
-            step("loading " + texture.string());
-            loaded_forest.emplace(canopy::make_billboard_forest(load_texture(texture)));
+            loaded_forest.emplace(load_and_compile(demo_scene, *registry, canopy::build_quality::automatic));
+            base.camera = loaded_forest->compiled.render_camera(aspect, demo_scene);
         });
-        auto& forest = *loaded_forest;
+        canopy::compiled_scene const& forest = loaded_forest->compiled;
         double const build_seconds = seconds_since(build_start);
         base.scene_name = "demo scene";
-        base.camera = canopy::pinhole_camera::look_at(forest.camera_eye, forest.camera_target, {0, 1, 0},
-                                                      forest.camera_fovy, aspect);
         if (root_rank())
             fmt::print(stderr, "demo scene: {} instances of {} meshes, built in {:.1f} ms\n",
-                       forest.scene.top_mesh_instances.size(), forest.scene.meshes.size(), build_seconds * 1e3);
+                       forest.top_mesh_instances.size(), forest.meshes.size(), build_seconds * 1e3);
         for (auto const& f : figures) {
             render_job job = base;
             if (f.kernel) job.kernel = f.kernel;
             job.intersector = f.intersector;
             job.output = out / f.file;
-            results.emplace_back(job.output.string(), render_image(forest.scene, job));
+            results.emplace_back(job.output.string(), render_image(forest, job));
         }
     } else {
         std::optional<loaded_graph> loaded_scene;
         on_every_rank([&] {
             loaded_scene.emplace(load_and_compile(*scene_path, *registry, quality));
-            base.camera = scene_camera(loaded_scene->compiled, *scene_path, aspect);
+            base.camera = loaded_scene->compiled.render_camera(aspect, *scene_path);
         });
         loaded_graph const& loaded = *loaded_scene;
         canopy::compiled_scene const& scene = loaded.compiled;
@@ -1367,8 +1267,7 @@ int run_info(std::span<char*> all_args) {
                    mesh_nodes, mesh_bytes * per_triangle);
     }
     for (auto const& grp : c.groups) print_stats(fmt::format("group '{}' BVH", grp.name).c_str(), canopy::compute_stats(grp.accel));
-    if (c.levels == 1) print_stats("top-level BVH", canopy::compute_stats(c.top1));
-    if (c.levels == 2) print_stats("top-level BVH", canopy::compute_stats(c.top2));
+    if (c.levels > 0) c.visit_root([](auto const& root) { print_stats("top-level BVH", canopy::compute_stats(root)); });
     return 0;
 }
 

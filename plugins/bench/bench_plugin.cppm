@@ -12,7 +12,11 @@
 //          default: load(s, file, parent, "bench") picks this one) the strict OBJ subset: `v` and
 //          triangular `f` lines only; triangle i is the i-th `f` line (its prim_id).
 // Vertices are not shared between triangles (three per triangle, as the subset reader returns
-// them). Each file becomes a group named after it. Parameters: none.
+// them). Each file becomes a group named after it. Parameters: none. add_bench_scene lays out
+// bench content made in code (the benchmarks' generated scenes) the same way; compiled with
+// compile_options::keep_single_instance, a file gives what the formats require of `canopy trace`:
+// prim = the triangle's `f` line, inst = the matrix line (none for an .obj), also for a single
+// identity instance.
 // Errors: the format reader's scene_errors, passed on as they are, naming the file at fault (the
 // .inst or its mesh) and the line: files that are not text, faces that are not triangles, bad or
 // non-finite numbers, numbers that overflow a float, zero or out-of-range indices, a missing or
@@ -22,6 +26,7 @@
 module;
 #include <cstdint>
 #include <filesystem>
+#include <span>
 #include <string>
 #include <utility>
 export module canopy.plugins.bench;
@@ -32,22 +37,31 @@ export namespace canopy {
 
 void register_bench_plugin(registry& r);
 
+// Bench content under `parent`, laid out as the plugin lays out its files: a group named after
+// `file`; in it the mesh (triangle i = prim_id i, named after `mesh_file`) as a mesh node, or,
+// when `instances` is not empty, one instance node per transform (instance_id = its index) of a
+// free-standing prototype mesh node. Nodes take `file` as their source, the mesh `mesh_file`.
+// Returns the group. Throws scene_error for a mesh over 32-bit vertex indices.
+node_id add_bench_scene(scene& s, node_id parent, std::span<triangle const> mesh,
+                        std::span<affine_transform<float> const> instances, std::filesystem::path const& file,
+                        std::filesystem::path const& mesh_file);
+
 } // namespace canopy
 
 namespace canopy {
 
 namespace {
 
-mesh_data to_mesh(bench_mesh const& in, std::filesystem::path const& file) {
-    if (in.triangles.size() > (std::size_t(1) << 32) / 3 - 1)
-        throw scene_error(file.string(), "", std::to_string(in.triangles.size()) +
+mesh_data to_mesh(std::span<triangle const> in, std::filesystem::path const& file) {
+    if (in.size() > (std::size_t(1) << 32) / 3 - 1)
+        throw scene_error(file.string(), "", std::to_string(in.size()) +
                                                  " triangles: more than 32-bit vertex indices reach (three per triangle)");
     mesh_data m;
     m.name = file.filename().string();
     m.source = file.string();
-    m.positions.reserve(3 * in.triangles.size());
-    m.triangles.reserve(in.triangles.size());
-    for (auto const& t : in.triangles) {
+    m.positions.reserve(3 * in.size());
+    m.triangles.reserve(in.size());
+    for (auto const& t : in) {
         auto const first = std::uint32_t(m.positions.size());
         m.positions.insert(m.positions.end(), {t.v0, t.v1, t.v2});
         m.triangles.push_back({first, first + 1, first + 2});
@@ -57,28 +71,32 @@ mesh_data to_mesh(bench_mesh const& in, std::filesystem::path const& file) {
 
 node_id load_inst(scene& s, std::filesystem::path const& file, node_id parent, registry const&) {
     bench_instanced_scene const in = read_bench_inst(file);
-    std::uint32_t const mesh = s.add_mesh(to_mesh(in.mesh, in.mesh_path));
-    node_id const prototype = s.add_mesh_node(no_node, mesh, in.mesh_path.filename().string());
-    s.at(prototype).source = file.string();
-    node_id const group = s.add_group(parent, file.filename().string());
-    s.at(group).source = file.string();
-    for (std::size_t k = 0; k < in.instances.size(); ++k) {
-        node_id const n = s.add_instance(group, prototype, in.instances[k], std::uint32_t(k));
-        s.at(n).source = file.string();
-    }
-    return group;
+    return add_bench_scene(s, parent, in.mesh.triangles, in.instances, file, in.mesh_path);
 }
 
 node_id load_obj(scene& s, std::filesystem::path const& file, node_id parent, registry const&) {
-    bench_mesh const in = read_bench_obj(file);
-    std::uint32_t const mesh = s.add_mesh(to_mesh(in, file));
-    node_id const group = s.add_group(parent, file.filename().string());
-    s.at(group).source = file.string();
-    s.at(s.add_mesh_node(group, mesh, file.filename().string())).source = file.string();
-    return group;
+    return add_bench_scene(s, parent, read_bench_obj(file).triangles, {}, file, file);
 }
 
 } // namespace
+
+node_id add_bench_scene(scene& s, node_id parent, std::span<triangle const> mesh,
+                        std::span<affine_transform<float> const> instances, std::filesystem::path const& file,
+                        std::filesystem::path const& mesh_file) {
+    std::uint32_t const m = s.add_mesh(to_mesh(mesh, mesh_file));
+    std::string const mesh_name = mesh_file.filename().string();
+    node_id const prototype = instances.empty() ? no_node : s.add_mesh_node(no_node, m, mesh_name);
+    if (prototype != no_node) s.at(prototype).source = file.string();
+    node_id const group = s.add_group(parent, file.filename().string());
+    s.at(group).source = file.string();
+    if (instances.empty()) {
+        s.at(s.add_mesh_node(group, m, mesh_name)).source = file.string();
+        return group;
+    }
+    for (std::size_t k = 0; k < instances.size(); ++k)
+        s.at(s.add_instance(group, prototype, instances[k], std::uint32_t(k))).source = file.string();
+    return group;
+}
 
 void register_bench_plugin(registry& r) {
     r.add_loader(".inst", "bench", "benchmark instanced scene: one shared .obj mesh, one 3×4 matrix per instance",

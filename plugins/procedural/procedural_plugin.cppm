@@ -26,12 +26,15 @@
 //     size            number   0.1      (0, 1e6]
 //     extent          number   1        (0, 1e6]
 //     seed            integer  1        [0, 4294967295]
-//   billboard_forest  the demo scene of the paper's Figure 1 as a scene graph: a 40 × 40 ground
-//                     grid, one icosphere mesh (3 subdivisions) placed `spheres` times and one
-//                     billboard quad (two triangles, alpha-masked material with a procedural
-//                     RGBA tree texture) placed `billboards` times, all through instance nodes of
-//                     free-standing prototypes (compile() builds each mesh once), and a camera.
-//                     Same layout as canopy.billboard_forest for the same seed.
+//   billboard_forest  the demo scene of the paper's Figure 1 (`canopy render` without a scene, the
+//                     figure1_billboards example): a 40 × 40 ground grid, one icosphere mesh (3
+//                     subdivisions) placed `spheres` times and one billboard quad (two triangles,
+//                     texture coordinates (0,0) top-left … (1,1) bottom-right, an alpha-masked
+//                     material with the RGBA tree texture of make_tree_texture and the paper's
+//                     alpha cutoff 0.01) placed `billboards` times facing the camera, all through
+//                     instance nodes of free-standing prototypes (compile() builds each mesh
+//                     once), and the camera. Meshes compile in that order (geom_id 0 ground,
+//                     1 sphere, 2 billboard); placements: the ground, the spheres, the billboards.
 //     billboards      integer  160      [0, 100000]
 //     spheres         integer  7        [0, 10000]
 //     seed            integer  1        [0, 4294967295]
@@ -258,7 +261,7 @@ node_id generate_billboard_forest(scene& s, node_id parent, parameters const& p)
     std::uint32_t const seed = seed_of(p, context);
     int const texture_size = int(p.get_integer("texture_size", 128, 8, 4096, context));
 
-    // The camera of canopy.billboard_forest; billboards turn towards its eye.
+    // The demo's camera; billboards turn towards its eye.
     camera_data camera;
     camera.eye = {0.0f, 3.2f, 17.0f};
     camera.target = {0.0f, 2.0f, 0.0f};
@@ -267,7 +270,9 @@ node_id generate_billboard_forest(scene& s, node_id parent, parameters const& p)
     int const ground_material = s.add_material({"ground", {0.55f, 0.5f, 0.35f}});
     int const ball_material = s.add_material({"ball", {0.75f, 0.3f, 0.25f}});
     int const tree_image = s.add_image(make_tree_texture(texture_size));
-    int const tree_material = s.add_material({"tree", {1.0f, 1.0f, 1.0f}, tree_image, alpha_mode::mask, 0.5f});
+    // The paper's cutoff (`hr.hit &= color.w >= .01f`): a billboard is cut only where the texture
+    // is (nearly) fully transparent around the hit.
+    int const tree_material = s.add_material({"tree", {1.0f, 1.0f, 1.0f}, tree_image, alpha_mode::mask, 0.01f});
 
     auto ground_triangles = make_grid(40, 40);
     for (auto& t : ground_triangles)
@@ -290,7 +295,7 @@ node_id generate_billboard_forest(scene& s, node_id parent, parameters const& p)
     node_id const ball_prototype = s.add_mesh_node(no_node, s.add_mesh(std::move(ball)), "sphere");
     node_id const quad_prototype = s.add_mesh_node(no_node, s.add_mesh(std::move(quad)), "billboard");
 
-    // The draws of canopy.billboard_forest, in its order.
+    // Every sphere, then every billboard, drawn from one stream: deterministic in the seed.
     std::mt19937 rng(seed);
     auto uniform = [&](float lo, float hi) { return lo + (hi - lo) * float(double(rng()) / double(std::mt19937::max())); };
     for (int k = 0; k < spheres; ++k) {
