@@ -5,6 +5,7 @@
 export module canopy.bvh;
 export import canopy.intersector;
 export import :storage;
+export import :protocol;
 export import :parallel;
 export import :wide;
 export import :binning;

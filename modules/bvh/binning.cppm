@@ -13,7 +13,7 @@ module;
 export module canopy.bvh:binning;
 import canopy.geometry;
 
-export namespace canopy::detail {
+namespace canopy::detail {
 
 template <typename S>
 struct bin {

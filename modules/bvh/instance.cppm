@@ -28,6 +28,7 @@ module;
 export module canopy.bvh:instance;
 import canopy.intersector;
 import :storage;
+import :protocol;
 import :traverse;
 
 export namespace canopy {
@@ -90,7 +91,7 @@ basic_aabb<typename BVH::value_type> get_bounds(instance<BVH> const& inst) {
     return inst.identity ? inst.storage.bounds() : transform_box(inst.object_to_world, inst.storage.bounds());
 }
 
-template <typename Ray, typename BVH, typename I, typename Query>
+template <typename Ray, typename BVH, typename I, hit_collector<ray_value_t<Ray>> Query>
 bool traverse(Ray& ray, instance<BVH> const& inst, I& isect, Query& query) {
     if (inst.storage.empty()) return false;
     query.enter_instance(inst.inst_id);

@@ -43,9 +43,7 @@ import :storage;
 import :parallel;
 import :instance;
 
-export namespace canopy {
-
-namespace detail {
+namespace canopy::detail {
 
 // The leaves' boxes from what they store, then every inner box bottom-up, in both node arrays.
 template <typename Prim>
@@ -90,7 +88,9 @@ void refit_boxes(bvh<Prim>& b) {
     }
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // Recomputes b's boxes from the primitives it stores (see the top of this file).
 template <typename Prim>

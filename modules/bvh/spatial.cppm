@@ -47,7 +47,7 @@ import :parallel;
 import :wide;
 import :binning;
 
-export namespace canopy::detail {
+namespace canopy::detail {
 
 // The primitive types spatial splits apply to.
 template <typename Prim>

@@ -20,7 +20,8 @@ import canopy.geometry;
 import :storage;
 import :parallel;
 
-export namespace canopy {
+// The builder's own steps: nothing here is exported.
+namespace canopy {
 
 namespace detail {
 

@@ -21,15 +21,14 @@ module;
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <iterator>
 #include <limits>
 #include <type_traits>
 #include <utility>
 export module canopy.query:single;
 export import canopy.bvh;
 
-export namespace canopy {
-
-namespace detail {
+namespace canopy::detail {
 
 // Unsigned a < b, lane-wise, for ids held in signed SIMD int lanes.
 template <typename I>
@@ -206,7 +205,9 @@ void run_query(Ray& ray, It first, It last, I& isect, Query& query) {
     }
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // A ray or a packet of rays (basic_ray<T>, prepared_ray<T>): what the single-ray queries take, so
 // that spans of rays go to the batch queries.
@@ -218,7 +219,12 @@ concept ray_like = requires(Ray const& r) {
     r.tmax;
 };
 
-template <ray_like Ray, typename It, typename I = default_intersector>
+// An iterator over what a query can trace: primitives, or structures holding them
+// (canopy.bvh:protocol, traceable).
+template <typename It>
+concept traceable_iterator = traceable<std::remove_cvref_t<std::iter_reference_t<It>>>;
+
+template <ray_like Ray, traceable_iterator It, typename I = default_intersector>
 basic_hit_record<ray_value_t<Ray>> closest_hit(Ray const& ray, It first, It last, I&& isect = I{}) {
     using T = ray_value_t<Ray>;
     detail::closest_query<T> query;
@@ -231,7 +237,7 @@ basic_hit_record<ray_value_t<Ray>> closest_hit(Ray const& ray, It first, It last
     return query.best;
 }
 
-template <ray_like Ray, typename It, typename I = default_intersector>
+template <ray_like Ray, traceable_iterator It, typename I = default_intersector>
 basic_hit_record<ray_value_t<Ray>> any_hit(Ray const& ray, It first, It last, I&& isect = I{}) {
     using T = ray_value_t<Ray>;
     detail::any_query<T> query;
@@ -247,7 +253,7 @@ basic_hit_record<ray_value_t<Ray>> any_hit(Ray const& ray, It first, It last, I&
 }
 
 // Up to N accepted hits sorted by t (ties as above); entries past the last hit have hit == false.
-template <std::size_t N, ray_like Ray, typename It, typename I = default_intersector>
+template <std::size_t N, ray_like Ray, traceable_iterator It, typename I = default_intersector>
 std::array<basic_hit_record<ray_value_t<Ray>>, N> multi_hit(Ray const& ray, It first, It last, I&& isect = I{}) {
     static_assert(N > 0);
     detail::multi_query<ray_value_t<Ray>, N> query;
