@@ -42,16 +42,6 @@ concept bounding_box = is_basic_aabb_v<std::remove_cvref_t<B>>;
 
 export namespace canopy {
 
-// A leaf primitive: bounds for the builder and a ray test for the queries, both found by ADL (see
-// the top of this file). Intersectors may replace the test (canopy.intersector); the library's
-// own is what they fall back to.
-template <typename P>
-concept primitive = requires(P const& p) {
-    { get_bounds(p) } -> detail::bounding_box;
-} && requires(P const& p, basic_ray<bounds_value_t<P>> const& ray) {
-    { intersect(ray, p) } -> std::convertible_to<basic_hit_record<bounds_value_t<P>>>;
-};
-
 // The state of a query (canopy.query) that traversal reports to, for rays of value type T:
 // report(hit_record, ray) accepts or rejects a candidate, tightens ray.tmax as the query allows,
 // and returns true when the whole traversal must stop; stamp(hit_record) fills in the current
@@ -93,6 +83,16 @@ concept acceleration_structure = requires { typename S::acceleration_structure_t
 } && requires(S const& s, prepared_ray<bounds_value_t<S>>& ray, default_intersector& isect,
               detail::collector_archetype<bounds_value_t<S>>& collector) {
     { traverse(ray, s, isect, collector) } -> std::same_as<bool>;
+};
+
+// A leaf primitive: not an acceleration structure, with bounds for the builder and a ray test for
+// the queries, both found by ADL (see the top of this file). Intersectors may replace the test
+// (canopy.intersector); the library's own is what they fall back to.
+template <typename P>
+concept primitive = !acceleration_structure<P> && requires(P const& p) {
+    { get_bounds(p) } -> detail::bounding_box;
+} && requires(P const& p, basic_ray<bounds_value_t<P>> const& ray) {
+    { intersect(ray, p) } -> std::convertible_to<basic_hit_record<bounds_value_t<P>>>;
 };
 
 // What a BVH's leaves and a query's range may hold.
