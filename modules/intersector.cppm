@@ -135,8 +135,7 @@ concept primitive_hook_for = requires(I& isect, Ray const& ray, detail::hook_pro
 
 // I has a ray/box hook of its own (called with the precomputed inverse direction).
 template <typename I, typename Ray, typename Box, typename InvDir>
-concept box_hook_for = requires(I& isect, Ray const& ray, detail::hook_probe<Box> const& box,
-                                InvDir const& inv_dir) {
+concept box_hook_for = requires(I& isect, Ray const& ray, detail::hook_probe<Box> const& box, InvDir const& inv_dir) {
     { isect(ray, box, inv_dir) };
 };
 

@@ -78,12 +78,14 @@ export namespace canopy {
 // A structure that contains primitives (or other structures) and is traversed with the caller's
 // intersector and hit collector (see the top of this file).
 template <typename S>
-concept acceleration_structure = requires { typename S::acceleration_structure_tag; } && requires(S const& s) {
-    { get_bounds(s) } -> detail::bounding_box;
-} && requires(S const& s, prepared_ray<bounds_value_t<S>>& ray, default_intersector& isect,
-              detail::collector_archetype<bounds_value_t<S>>& collector) {
-    { traverse(ray, s, isect, collector) } -> std::same_as<bool>;
-};
+concept acceleration_structure = requires { typename S::acceleration_structure_tag; } &&
+                                 requires(S const& s) {
+                                     { get_bounds(s) } -> detail::bounding_box;
+                                 } &&
+                                 requires(S const& s, prepared_ray<bounds_value_t<S>>& ray, default_intersector& isect,
+                                          detail::collector_archetype<bounds_value_t<S>>& collector) {
+                                     { traverse(ray, s, isect, collector) } -> std::same_as<bool>;
+                                 };
 
 // A leaf primitive: not an acceleration structure, with bounds for the builder and a ray test for
 // the queries, both found by ADL (see the top of this file). Intersectors may replace the test
