@@ -64,8 +64,7 @@
 //   build_quality::automatic, builds that way only meshes of long thin triangles (bvh::quality
 //   says); with build_quality::fast every triangle is in one leaf.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <concepts>
 #include <cstdint>

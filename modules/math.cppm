@@ -6,8 +6,7 @@
 // of a vec3<simd::float8> result is bit-identical to the same computation on vec3<float>.
 // Comparisons return simd::mask_type_t<T> (bool for scalars). Nothing here throws.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <bit>

@@ -13,8 +13,7 @@
 // conversion, and one documented order for horizontal reductions. Only which NaN a NaN result
 // carries may differ.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 
 #include <array>

@@ -14,8 +14,7 @@
 // max_leaf_size primitives, except where max_depth stops the recursion or all centroids coincide
 // (then leaves split by index). NaN bounds never crash the builder (they sort into bin 0).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>

@@ -17,8 +17,7 @@
 // Instance ids in hit records: inst_id is the outermost instance on the path to the hit,
 // inner_inst_id[0] the next one down, and so on (see canopy.geometry:hit_record).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <cmath>
 #include <cstdint>

@@ -3,8 +3,7 @@
 // They are ordinary (non-template) functions compiled into this module's object file, so
 // importers instantiate no oneTBB templates themselves; they are the builder's own, not exported.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <cstddef>
 #include <functional>

@@ -16,8 +16,7 @@
 // The builder, the queries and traverse are constrained with these concepts: a type that lacks a
 // piece is refused at the call, and the compiler's notes name the missing expression.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <bit>
 #include <concepts>

@@ -28,8 +28,7 @@
 // Leaves are refitted in parallel (bvh:parallel); the inner-node sweeps run on one thread (an
 // inner node per leaf or so, two boxes merged each).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <cstddef>
 #include <cstdint>

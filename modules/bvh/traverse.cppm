@@ -24,8 +24,7 @@
 // every hit child is prefetched as soon as the node test is done, so that cache misses overlap
 // (incoherent rays in large BVHs are memory-bound).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>

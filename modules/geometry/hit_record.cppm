@@ -3,8 +3,7 @@
 // For scalar rays `hit` is a bool and the ids are std::uint32_t; for SIMD rays (T = float8, ...)
 // `hit` is a mask and every field is a SIMD type with one lane per ray.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <cstdint>

@@ -16,8 +16,7 @@
 // degenerate-triangle check (zero area, exact in double) is left to the caller, for the lanes it
 // reports, as the scalar test does it only for hits.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <bit>

@@ -39,8 +39,7 @@
 //   hr.hit.set(k, ...)), as for the packet single-ray queries.
 // Each query returns batch_stats: how many packets and single rays it traced.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>

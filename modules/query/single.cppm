@@ -15,8 +15,7 @@
 // miss without being traced. Packet rays (basic_ray<float8>, …) are supported by closest_hit and
 // any_hit; such lanes are inactive and report misses.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <cstddef>
