@@ -23,6 +23,13 @@ add_library(canopy_isa INTERFACE)
 target_compile_options(canopy_isa INTERFACE ${CANOPY_ISA_FLAGS})
 # Watertight triangle tests depend on the exact evaluation order: pin contraction, never fast-math.
 target_compile_options(canopy_isa INTERFACE "-ffp-contract=${CANOPY_FP_CONTRACT}" -fno-fast-math)
+# CANOPY_DCHECK (modules/include/canopy/check.hpp): PUBLIC, so that the package records whether its
+# preconditions are checked.
+target_include_directories(canopy_isa INTERFACE $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/modules/include>
+                                                $<INSTALL_INTERFACE:include>)
+if(CANOPY_DCHECKS)
+  target_compile_definitions(canopy_isa INTERFACE CANOPY_DCHECKS=1)
+endif()
 if(CANOPY_SANITIZE)
   list(JOIN CANOPY_SANITIZE "," canopy_sanitizers)
   target_compile_options(canopy_isa INTERFACE "-fsanitize=${canopy_sanitizers}" -fno-omit-frame-pointer

@@ -5,7 +5,8 @@
 // A user-defined primitive joins the library by providing, in its own namespace:
 //   basic_aabb<S> get_bounds(P const&);                  (for BVH builds)
 //   hit_record<Ray, P> intersect(Ray const&, P const&);  (for queries)
-// and members prim_id / geom_id if the builder should number it (see canopy.bvh).
+// and members prim_id / geom_id if the builder should number it (concept canopy::primitive,
+// canopy.bvh:protocol).
 export module canopy.geometry;
 export import canopy.math;
 export import :hit_record;

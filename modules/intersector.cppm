@@ -37,7 +37,7 @@
 //     fine, and so is one that says `using` and whose hooks are for another primitive type
 //     (moller_trumbore_intersector over spheres): nothing it declares looks meant for the query.
 // - Nested structures (BVHs, instances) are never handed to hooks: the intersector is passed down
-//   into them (call_hooks_or_descend below is the one place that decides).
+//   into them (call_hooks_or_descend, canopy.bvh:protocol, is the one place that decides).
 // - With default_intersector, or with hooks that only forward, the calls inline to exactly the
 //   default tests: no cost.
 // - Hooks receive the ray as traversal prepared it. A box hook that forwards to
@@ -64,10 +64,8 @@
 //   build_quality::automatic, builds that way only meshes of long thin triangles (bvh::quality
 //   says); with build_quality::fast every triangle is in one leaf.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
-#include <bit>
 #include <concepts>
 #include <cstdint>
 #include <type_traits>
@@ -75,7 +73,7 @@ module;
 export module canopy.intersector;
 export import canopy.geometry;
 
-export namespace canopy {
+namespace canopy::detail {
 
 // Types that only hooks written by the user accept (as `aabb const&` / `triangle const&` or
 // generically): the base class's forwarding operator() excludes them. Used in unevaluated checks
@@ -89,11 +87,13 @@ inline constexpr bool is_hook_probe_v = false;
 template <typename Base>
 inline constexpr bool is_hook_probe_v<hook_probe<Base>> = true;
 
-namespace detail {
 // The argument of basic_intersector's marker overload: an intersector hides the inherited
 // operator() exactly when a call with it fails.
 struct inherited_call_probe {};
-} // namespace detail
+
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // CRTP base: forwards every test to the library's intersect(), found by ADL. It does not take
 // the prepared rays of traversal (which derive from basic_ray): a user's hook declared for
@@ -102,7 +102,7 @@ struct inherited_call_probe {};
 template <typename Derived>
 struct basic_intersector {
     template <typename Ray, typename Prim, typename... Args>
-        requires(!is_hook_probe_v<Prim>) && (!is_hook_probe_v<Ray>) && (!is_prepared_ray_v<Ray>) &&
+        requires(!detail::is_hook_probe_v<Prim>) && (!detail::is_hook_probe_v<Ray>) && (!is_prepared_ray_v<Ray>) &&
                 requires(Ray const& ray, Prim const& prim, Args&&... args) {
                     intersect(ray, prim, std::forward<Args>(args)...);
                 }
@@ -125,21 +125,16 @@ struct moller_trumbore_intersector : basic_intersector<moller_trumbore_intersect
     }
 };
 
-// A structure that contains primitives and is traversed with the caller's intersector and query
-// (bvh<P>, instance<B>): it declares `using acceleration_structure_tag = void;`.
-template <typename P>
-concept acceleration_structure = requires { typename P::acceleration_structure_tag; };
-
 // I has a ray/primitive hook of its own for Prim (a member, a lambda, an overload set); the
 // forwarding operator inherited from basic_intersector does not count.
 template <typename I, typename Ray, typename Prim>
-concept primitive_hook_for = requires(I& isect, Ray const& ray, hook_probe<Prim> const& prim) {
+concept primitive_hook_for = requires(I& isect, Ray const& ray, detail::hook_probe<Prim> const& prim) {
     { isect(ray, prim) };
 };
 
 // I has a ray/box hook of its own (called with the precomputed inverse direction).
 template <typename I, typename Ray, typename Box, typename InvDir>
-concept box_hook_for = requires(I& isect, Ray const& ray, hook_probe<Box> const& box, InvDir const& inv_dir) {
+concept box_hook_for = requires(I& isect, Ray const& ray, detail::hook_probe<Box> const& box, InvDir const& inv_dir) {
     { isect(ray, box, inv_dir) };
 };
 
@@ -148,27 +143,6 @@ template <typename I, typename Ray>
 concept filter_hook_for = requires(I& isect, Ray const& ray, basic_hit_record<ray_value_t<Ray>> const& hr) {
     { isect.filter(ray, hr) };
 };
-
-// The ray/box test of the traversal: the intersector's hook if it has one, else the default.
-// A hook's result is converted to the default's (intersector_mistake_v checks it converts).
-template <typename I, typename Ray, typename Box, typename InvDir>
-[[gnu::always_inline]] inline auto test_box(I& isect, Ray const& ray, Box const& box, InvDir const& inv_dir)
-    -> decltype(intersect(ray, box, inv_dir)) {
-    if constexpr (box_hook_for<I, Ray, Box, InvDir>)
-        return isect(ray, box, inv_dir);
-    else
-        return intersect(ray, box, inv_dir);
-}
-
-// The ray/primitive test of the traversal: the intersector's hook if it has one, else the default.
-template <typename I, typename Ray, typename Prim>
-[[gnu::always_inline]] inline basic_hit_record<ray_value_t<Ray>> test_primitive(I& isect, Ray const& ray,
-                                                                                Prim const& prim) {
-    if constexpr (primitive_hook_for<I, Ray, Prim>)
-        return isect(ray, prim);
-    else
-        return intersect(ray, prim);
-}
 
 // ---- mistakes ------------------------------------------------------------------------------
 
@@ -190,7 +164,9 @@ enum class intersector_mistake {
     no_usable_hook,           // an operator() of its own, none of which is a hook here
 };
 
-namespace detail {
+} // namespace canopy
+
+namespace canopy::detail {
 
 template <typename T>
 struct is_basic_triangle : std::false_type {};
@@ -306,107 +282,14 @@ constexpr intersector_mistake find_intersector_mistake() {
     }
 }
 
-// The leaf primitive type of acceleration structures that say which (bvh<P>: primitive_type;
-// instance<B>: bvh_type); others are their own leaf.
-template <typename P>
-struct leaf_primitive {
-    using type = P;
-};
-template <typename P>
-    requires requires { typename P::primitive_type; }
-struct leaf_primitive<P> : leaf_primitive<typename P::primitive_type> {};
-template <typename P>
-    requires requires { typename P::bvh_type; }
-struct leaf_primitive<P> : leaf_primitive<typename P::bvh_type> {};
+} // namespace canopy::detail
 
-} // namespace detail
+export namespace canopy {
 
-// The leaf primitive type of a query over a range of P: P itself, or the primitives at the
-// bottom of nested BVHs and instances.
-template <typename P>
-using leaf_primitive_t = typename detail::leaf_primitive<P>::type;
-
-// The mistake I makes in a query over a range of Elem with rays of type Ray (see above); none for
-// acceleration structures whose leaves the library cannot name.
-template <typename I, typename Ray, typename Elem>
-constexpr intersector_mistake find_intersector_mistake_in() {
-    using Leaf = leaf_primitive_t<Elem>;
-    using HookRay = std::conditional_t<acceleration_structure<Elem>, prepared_ray<ray_value_t<Ray>>, Ray>;
-    if constexpr (acceleration_structure<Leaf>)
-        return intersector_mistake::none;
-    else
-        return detail::find_intersector_mistake<I, HookRay, Leaf>();
-}
-
-template <typename I, typename Ray, typename Elem>
-inline constexpr intersector_mistake intersector_mistake_v = find_intersector_mistake_in<I, Ray, Elem>();
-
-// A candidate hit through the intersector's filter, if it has one: hr.hit keeps the lanes it
-// accepts. The query stamps the instance path first, so that the filter sees it.
-template <typename Ray, typename I, typename Query>
-[[gnu::always_inline]] inline void apply_filter(Ray const& ray, basic_hit_record<ray_value_t<Ray>>& hr, I& isect,
-                                                Query& query) {
-    if constexpr (filter_hook_for<I, Ray>) {
-        if (simd::none(hr.hit)) return;
-        query.stamp(hr);
-        hr.hit = hr.hit & isect.filter(ray, hr);
-    }
-}
-
-// The one place that tells leaf primitives from nested structures. Query is a hit accumulator
-// (canopy.query): report(hit_record, ray) accepts or rejects a candidate, tightens ray.tmax as
-// the query allows, and returns true when the whole traversal must stop; stamp(hit_record) fills
-// in the current instance path; enter_instance(id) / leave_instance() track it; wants_near_first
-// says whether traversal should order children near to far (closest and multi hit) or need not
-// (any hit). Nested structures are traversed by their own `traverse(ray, structure, isect,
-// query)` (found by ADL), which comes back here for their primitives. Returns true when the query
-// is finished.
-template <typename Ray, typename Prim, typename I, typename Query>
-[[gnu::always_inline]] inline bool call_hooks_or_descend(Ray& ray, Prim const& prim, I& isect, Query& query) {
-    if constexpr (acceleration_structure<Prim>) {
-        return traverse(ray, prim, isect, query);
-    } else {
-        auto hr = test_primitive(isect, ray, prim);
-        apply_filter(ray, hr, isect, query);
-        return query.report(hr, ray);
-    }
-}
-
-// The first `count` triangles of a leaf block. A triangle hook of the intersector sees them one
-// at a time, exactly as given (triangle_at), as the paper's API promises. Otherwise, for scalar
-// rays, the block's triangles are tested at once (intersect_block: bit-identical lane by lane;
-// degenerate triangles are known from the block and never tested) and the hit lanes go to the
-// filter and the query: in lane order for queries that stop at any hit (the first hit in leaf
-// order, as one at a time would find), by increasing (t, prim_id) otherwise, each while its t is
-// still within the ray's tightening tmax.
-template <typename Ray, typename I, typename Query>
-[[gnu::always_inline]] inline bool call_hooks_or_descend(Ray& ray, triangle_block const& block, int count, I& isect,
-                                                         Query& query) {
-    if constexpr (primitive_hook_for<I, Ray, triangle> || !is_prepared_ray_v<Ray> ||
-                  simd::simd_width_v<ray_value_t<Ray>> != 1) {
-        for (int lane = 0; lane < count; ++lane)
-            if (call_hooks_or_descend(ray, block.triangle_at(lane), isect, query)) return true;
-        return false;
-    } else {
-        auto const hits = intersect_block(ray, block);
-        for (std::uint32_t mask = hits.mask; mask != 0;) {
-            int lane = std::countr_zero(mask);
-            if constexpr (Query::wants_near_first) {
-                for (std::uint32_t rest = mask & (mask - 1); rest != 0; rest &= rest - 1) {
-                    int const other = std::countr_zero(rest);
-                    auto const o = std::size_t(other), l = std::size_t(lane);
-                    if (hits.t[o] < hits.t[l] || (hits.t[o] == hits.t[l] && block.prim_id[o] < block.prim_id[l]))
-                        lane = other;
-                }
-                if (!(hits.t[std::size_t(lane)] <= ray.tmax)) return false;
-            }
-            mask &= ~(1u << lane);
-            auto hr = hits.record(block, lane);
-            apply_filter(ray, hr, isect, query);
-            if (query.report(hr, ray)) return true;
-        }
-        return false;
-    }
-}
+// The mistake intersector I makes (see above) when its hooks receive rays of type Ray and the
+// leaf primitives are of type Prim. canopy.bvh:protocol (intersector_mistake_v) finds Ray and
+// Prim for a query over a range of primitives or of nested structures.
+template <typename I, typename Ray, typename Prim>
+inline constexpr intersector_mistake hook_mistake_v = detail::find_intersector_mistake<I, Ray, Prim>();
 
 } // namespace canopy

@@ -6,11 +6,11 @@
 // of a vec3<simd::float8> result is bit-identical to the same computation on vec3<float>.
 // Comparisons return simd::mask_type_t<T> (bool for scalars). Nothing here throws.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <bit>
+#include <canopy/check.hpp>
 #include <concepts>
 #include <cstdint>
 #include <limits>
@@ -308,6 +308,7 @@ template <std::floating_point T> constexpr int max_dimension(vec3<T> const& v) {
 
 // {v[kx], v[ky], v[kz]}; preconditions: each index in [0, 3).
 template <typename T> constexpr vec3<T> permute(vec3<T> const& v, int kx, int ky, int kz) {
+    CANOPY_DCHECK(unsigned(kx) < 3u && unsigned(ky) < 3u && unsigned(kz) < 3u, "permute: indices in [0, 3)");
     return {v[kx], v[ky], v[kz]};
 }
 
@@ -324,13 +325,16 @@ template <detail::vector V> constexpr simd::mask_type_t<typename V::value_type> 
 // Lane i of a SIMD vector as a scalar vector (precondition: 0 <= i < simd_width_v<T>); for a
 // scalar T, lane 0 is the vector itself.
 template <detail::vector V> constexpr detail::scalar_vector_t<V> get_lane(V const& v, int i) {
+    CANOPY_DCHECK(i >= 0 && i < simd::simd_width_v<typename V::value_type>, "get_lane: lane in [0, simd width)");
     detail::scalar_vector_t<V> r;
     for (int k = 0; k < detail::vector_traits<V>::size; ++k)
         r[k] = detail::lane(v[k], i);
     return r;
 }
 
+// The same precondition: 0 <= i < simd_width_v<T>.
 template <detail::vector V> constexpr void set_lane(V& v, int i, detail::scalar_vector_t<V> const& s) {
+    CANOPY_DCHECK(i >= 0 && i < simd::simd_width_v<typename V::value_type>, "set_lane: lane in [0, simd width)");
     for (int k = 0; k < detail::vector_traits<V>::size; ++k)
         detail::set_lane(v[k], i, s[k]);
 }

@@ -30,8 +30,7 @@
 // an ulp. At a texel centre the result is that texel exactly; halfway between two centres it is
 // their average, rounded once. Texel values are expected to be finite.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <concepts>
 #include <cstddef>

@@ -1,9 +1,11 @@
 // canopy.scene:error — the one exception type for bad scene input.
 //
 // Every loader, generator and compile step, the benchmark file readers (canopy.bench_formats) and
-// image I/O (canopy.image_io) report bad input by throwing scene_error; the library defines no
-// other exception type. Its message names the file, the place in it (line, element or node, where
-// known) and the problem, as
+// image I/O (canopy.image_io) report bad input by throwing scene_error, and nothing else does.
+// (Other errors are not bad input: a broken precondition of the library's API throws
+// std::invalid_argument, canopy.distributed's remote_failure carries another process's error.)
+// Its message names the file, the place in it (line, element or node, where known) and the
+// problem, as
 //   "forest.json: node 'trees': instance target 'oak' does not exist"
 //   "bunny.obj:1207: vertex index 40112 is out of range (35947 vertices so far)"
 // so a user can find the fault without a debugger. A file name over 160 bytes is shown shortened

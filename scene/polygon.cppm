@@ -45,7 +45,9 @@ struct polygon_triangles {
     bool fanned_fallback = false; // fanned although not convex (may cover more than the face): report it
 };
 
-namespace detail {
+} // namespace canopy
+
+namespace canopy::detail {
 
 struct point2 {
     double x, y;
@@ -84,7 +86,9 @@ inline void fan(std::span<std::uint32_t const> corners, polygon_triangles& out) 
     for (std::size_t k = 1; k + 1 < corners.size(); ++k) out.triangles.push_back({corners[0], corners[k], corners[k + 1]});
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 inline polygon_triangles triangulate_polygon(std::span<vec3<float> const> corners) {
     using detail::point2;

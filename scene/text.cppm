@@ -149,7 +149,9 @@ template <typename T> struct number_token {
     explicit operator bool() const noexcept { return problem == number_problem::none; }
 };
 
-namespace detail {
+} // namespace canopy
+
+namespace canopy::detail {
 
 // A leading '+' dropped (std::from_chars reads none); "++1" and "+-1" keep theirs, and fail.
 constexpr std::string_view without_plus(std::string_view t) noexcept {
@@ -184,7 +186,9 @@ constexpr bool large_magnitude(std::string_view t) noexcept {
     return lead + exponent >= 0;
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // A token as a float, by the rules above; value is 0 when there is a problem.
 inline number_token<float> read_float(std::string_view token) noexcept {

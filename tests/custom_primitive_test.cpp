@@ -35,7 +35,35 @@ canopy::basic_hit_record<float> intersect(canopy::ray const& r, disc const& d) {
     return hr;
 }
 
+// A structure of the user's own: discs in a list, tested one by one. It joins the library's BVHs
+// and queries through the traversal protocol (canopy.bvh:protocol): a tag, bounds, and a traverse
+// that hands every disc to call_hooks_or_descend.
+struct disc_list {
+    using acceleration_structure_tag = void;
+    std::vector<disc> discs;
+    int* traversals = nullptr; // counts the calls of traverse
+};
+
+canopy::aabb get_bounds(disc_list const& l) {
+    canopy::aabb box;
+    for (auto const& d : l.discs) box = canopy::extend(box, get_bounds(d));
+    return box;
+}
+
+template <typename Ray, typename I, typename Collector>
+bool traverse(Ray& ray, disc_list const& l, I& isect, Collector& collector) {
+    if (l.traversals) ++*l.traversals;
+    for (auto const& d : l.discs)
+        if (canopy::call_hooks_or_descend(ray, d, isect, collector)) return true;
+    return false;
+}
+
 } // namespace user
+
+static_assert(canopy::primitive<user::disc> && !canopy::acceleration_structure<user::disc>);
+static_assert(canopy::acceleration_structure<user::disc_list> && !canopy::primitive<user::disc_list>);
+static_assert(canopy::acceleration_structure<canopy::bvh<user::disc_list>>);
+static_assert(canopy::primitive<canopy::triangle> && canopy::acceleration_structure<canopy::bvh<canopy::triangle>>);
 
 namespace {
 
@@ -122,5 +150,39 @@ TEST_CASE("a user-defined primitive is instanced and reached by a custom interse
     }
     CHECK(hits > 50);
     CHECK(isect.calls > 0);
+    CHECK(mismatches == 0);
+}
+
+TEST_CASE("a user-defined acceleration structure is traversed inside the library's BVHs and queries") {
+    // Discs in 12 lists of 40, the lists in a BVH; every disc keeps its index as prim_id.
+    auto discs = make_discs(480);
+    for (std::size_t i = 0; i < discs.size(); ++i) discs[i].prim_id = std::uint32_t(i);
+    int traversals = 0;
+    std::vector<user::disc_list> lists(12);
+    for (std::size_t i = 0; i < discs.size(); ++i) lists[i / 40].discs.push_back(discs[i]);
+    for (auto& l : lists) l.traversals = &traversals;
+    auto const b = canopy::build_binned_sah(lists);
+
+    std::mt19937 rng(13);
+    int mismatches = 0, hits = 0;
+    for (int k = 0; k < 1000; ++k) {
+        auto const r = random_ray(rng);
+        // Brute force over the discs, with their own ids.
+        canopy::basic_hit_record<float> expected;
+        for (auto const& d : discs) {
+            auto const hr = user::intersect(r, d);
+            if (hr.hit && (!expected.hit || hr.t < expected.t || (hr.t == expected.t && hr.prim_id < expected.prim_id)))
+                expected = hr;
+        }
+        auto const in_bvh = canopy::closest_hit(r, &b, &b + 1);
+        auto const in_range = canopy::closest_hit(r, lists.begin(), lists.end());
+        hits += expected.hit;
+        for (auto const& got : {in_bvh, in_range})
+            mismatches += expected.hit != got.hit || (got.hit && (got.t != expected.t || got.prim_id != expected.prim_id));
+        // any_hit finds a hit exactly when there is one.
+        mismatches += canopy::any_hit(r, &b, &b + 1).hit != expected.hit;
+    }
+    CHECK(hits > 100);
+    CHECK(traversals > 0);
     CHECK(mismatches == 0);
 }

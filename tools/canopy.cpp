@@ -7,7 +7,8 @@
 //   canopy trace --scene FILE --rays FILE --query closest|any --out FILE
 //                [--intersector none|alpha] [--mode single|batch] [--reps N] [--threads N]
 //                [--quality automatic|fast|high] [LIMITS]
-//   canopy info SCENE [--quality automatic|fast|high] | --plugins [--plugin FILE]... [LIMITS]
+//   canopy info SCENE [--plugin FILE]... [--quality automatic|fast|high] [LIMITS]
+//   canopy info --plugins [--plugin FILE]... [LIMITS]
 //   --quality: the build quality of the mesh BVHs (canopy::build_quality; default automatic).
 //   LIMITS: [--max-file-bytes N] [--max-texels N] [--max-total-texels N] [--max-triangles N]
 //           [--max-placements N] [--max-depth N]  (canopy::resource_limits, set before anything
@@ -243,9 +244,10 @@ constexpr char const* info_options_usage =
 
 // --quality, for the commands that build BVHs of a scene's meshes.
 constexpr char const* quality_usage =
-    "  --quality Q         build quality of the mesh BVHs: fast (default; object splits) or high\n"
-    "                      (spatial splits too: faster tracing of long thin triangles, slower\n"
-    "                      builds, more memory)\n";
+    "  --quality Q         build quality of the mesh BVHs: automatic (default: high for meshes of\n"
+    "                      long thin triangles, else fast), fast (object splits) or high (spatial\n"
+    "                      splits too: faster tracing of long thin triangles, slower builds, more\n"
+    "                      memory)\n";
 
 std::string const trace_usage = std::string(trace_options_usage) + quality_usage + limits_usage;
 std::string const render_usage = std::string(render_options_usage) + quality_usage + limits_usage;

@@ -1,8 +1,7 @@
 // canopy.bvh:binning — the SAH bins shared by the builders (canopy.bvh:build, canopy.bvh:spatial):
 // bins of boxes along one axis, and the sweep that finds the cheapest boundary between them.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <bit>
@@ -13,7 +12,7 @@ module;
 export module canopy.bvh:binning;
 import canopy.geometry;
 
-export namespace canopy::detail {
+namespace canopy::detail {
 
 template <typename S>
 struct bin {

@@ -14,8 +14,7 @@
 // max_leaf_size primitives, except where max_depth stops the recursion or all centroids coincide
 // (then leaves split by index). NaN bounds never crash the builder (they sort into bin 0).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>
@@ -36,11 +35,9 @@ import :parallel;
 import :wide;
 import :binning;
 import :spatial;
+import :protocol;
 
-export namespace canopy {
-
-namespace detail {
-
+namespace canopy::detail {
 
 // A primitive's box and its input index: what the builder partitions in place (Embree's PrimRef),
 // so that every pass over a node's primitives reads consecutive memory instead of gathering boxes
@@ -318,7 +315,9 @@ void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t no
     }
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // The measure behind build_quality::automatic: of the triangles' summed box half-areas (what
 // the SAH pays for), the share held by triangles whose box half-area exceeds 64 times their own
@@ -349,7 +348,7 @@ bool spatial_splits_pay(std::span<basic_triangle<T> const> prims) {
     return sliver_box_share(prims) >= 0.05;
 }
 
-template <typename Prim>
+template <traceable Prim>
 bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options options = {}) {
     using S = bounds_value_t<Prim>;
     bvh<Prim> result;
@@ -395,7 +394,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     return result;
 }
 
-template <typename Prim>
+template <traceable Prim>
 bvh<Prim> build_binned_sah(std::vector<Prim> const& prims, bvh_build_options options = {}) {
     return build_binned_sah(std::span<Prim const>(prims), options);
 }

@@ -17,8 +17,7 @@
 // Instance ids in hit records: inst_id is the outermost instance on the path to the hit,
 // inner_inst_id[0] the next one down, and so on (see canopy.geometry:hit_record).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <cmath>
 #include <cstdint>
@@ -28,6 +27,7 @@ module;
 export module canopy.bvh:instance;
 import canopy.intersector;
 import :storage;
+import :protocol;
 import :traverse;
 
 export namespace canopy {
@@ -90,7 +90,7 @@ basic_aabb<typename BVH::value_type> get_bounds(instance<BVH> const& inst) {
     return inst.identity ? inst.storage.bounds() : transform_box(inst.object_to_world, inst.storage.bounds());
 }
 
-template <typename Ray, typename BVH, typename I, typename Query>
+template <typename Ray, typename BVH, typename I, hit_collector<ray_value_t<Ray>> Query>
 bool traverse(Ray& ray, instance<BVH> const& inst, I& isect, Query& query) {
     if (inst.storage.empty()) return false;
     query.enter_instance(inst.inst_id);

@@ -1,10 +1,9 @@
 // canopy.bvh:parallel — the two parallel primitives the builder needs, on oneTBB.
 //
 // They are ordinary (non-template) functions compiled into this module's object file, so
-// importers instantiate no oneTBB templates themselves.
+// importers instantiate no oneTBB templates themselves; they are the builder's own, not exported.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <cstddef>
 #include <functional>
@@ -13,7 +12,7 @@ module;
 #include <tbb/task_group.h>
 export module canopy.bvh:parallel;
 
-export namespace canopy {
+namespace canopy {
 
 // Runs a and b, possibly in parallel; returns when both are done.
 void parallel_invoke(std::function<void()> const& a, std::function<void()> const& b) {

@@ -28,8 +28,7 @@
 // Leaves are refitted in parallel (bvh:parallel); the inner-node sweeps run on one thread (an
 // inner node per leaf or so, two boxes merged each).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <cstddef>
 #include <cstdint>
@@ -43,9 +42,7 @@ import :storage;
 import :parallel;
 import :instance;
 
-export namespace canopy {
-
-namespace detail {
+namespace canopy::detail {
 
 // The leaves' boxes from what they store, then every inner box bottom-up, in both node arrays.
 template <typename Prim>
@@ -90,7 +87,9 @@ void refit_boxes(bvh<Prim>& b) {
     }
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // Recomputes b's boxes from the primitives it stores (see the top of this file).
 template <typename Prim>

@@ -26,8 +26,7 @@
 // triangle gives the same hit, bit for bit), but a triangle hook or a filter may see it once per
 // leaf (see canopy.intersector).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <bit>
@@ -47,7 +46,7 @@ import :parallel;
 import :wide;
 import :binning;
 
-export namespace canopy::detail {
+namespace canopy::detail {
 
 // The primitive types spatial splits apply to.
 template <typename Prim>

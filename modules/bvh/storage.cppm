@@ -8,8 +8,7 @@
 // owns a contiguous range. Depth never exceeds bvh_max_depth (the
 // builder enforces it), which bounds every traversal stack.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>

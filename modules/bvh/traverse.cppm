@@ -15,7 +15,7 @@
 // box tests of a ray are widened for its watertight triangle tests once per BVH entered with a
 // new ray (prepared_ray::widen_box_tests_for): no triangle the watertight test would hit sits in
 // a box the traversal culls.
-// Every primitive goes through call_hooks_or_descend (canopy.intersector): nested BVHs and
+// Every primitive goes through call_hooks_or_descend (canopy.bvh:protocol): nested BVHs and
 // instances receive the same intersector and query; the leaves of triangle BVHs are blocks of four
 // triangles. Stacked entries whose entry distance lies beyond the ray's current tmax are skipped
 // (closest-hit culling). Packet rays visit a child when a lane that reached the node hits it, and
@@ -24,8 +24,7 @@
 // every hit child is prefetched as soon as the node test is done, so that cache misses overlap
 // (incoherent rays in large BVHs are memory-bound).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>
@@ -37,6 +36,7 @@ module;
 export module canopy.bvh:traverse;
 import canopy.intersector;
 import :storage;
+import :protocol;
 
 export namespace canopy {
 
@@ -69,7 +69,9 @@ struct bvh_storage {
     leaf_type const* leaves = nullptr; // the leaves' triangle blocks, or their primitives
 };
 
-namespace detail {
+} // namespace canopy
+
+namespace canopy::detail {
 
 // The lanes of a packet that reached a node (bit k: lane k hit every box on the way); nothing for
 // scalar rays.
@@ -364,9 +366,9 @@ template <typename T, typename Prim, typename I, typename Query>
     return false;
 }
 
-} // namespace detail
+} // namespace canopy::detail
 
-namespace detail {
+namespace canopy::detail {
 
 // The traversal loop with one node tester (see the top of this file).
 template <typename Tester, typename T, typename Prim, typename I, typename Query>
@@ -404,12 +406,14 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
     }
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // Traverses b with a prepared ray; returns true when the query asked to stop (any-hit found,
 // packet finished). ray.tmax is tightened as the query allows. Scalar float rays whose box test
 // can take the fused form (canopy.geometry:box, slab_offsets) run the loop built for it.
-template <typename T, typename Prim, typename I, typename Query>
+template <typename T, typename Prim, typename I, hit_collector<T> Query>
 [[gnu::always_inline]] inline bool traverse(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect, Query& query) {
     using S = typename bvh<Prim>::value_type;
     if (b.empty()) return false;
@@ -423,7 +427,7 @@ template <typename T, typename Prim, typename I, typename Query>
 
 // Traverses b with a plain ray (prepared here, once; the triangle shear waits for the first leaf);
 // ray.tmax is tightened as the query allows.
-template <typename T, typename Prim, typename I, typename Query>
+template <typename T, typename Prim, typename I, hit_collector<T> Query>
 [[gnu::always_inline]] inline bool traverse(basic_ray<T>& ray, bvh_storage<Prim> const& b, I& isect, Query& query) {
     prepared_ray<T> prepared(ray, false);
     prepared.widen_box_tests_for(b.bounds());
@@ -433,7 +437,7 @@ template <typename T, typename Prim, typename I, typename Query>
 }
 
 // The same for a bvh object, with a prepared or a plain ray.
-template <typename Ray, typename Prim, typename I, typename Query>
+template <typename Ray, typename Prim, typename I, hit_collector<ray_value_t<Ray>> Query>
 [[gnu::always_inline]] inline bool traverse(Ray& ray, bvh<Prim> const& b, I& isect, Query& query) {
     return traverse(ray, bvh_storage<Prim>(b), isect, query);
 }

@@ -6,8 +6,7 @@
 // leaf. The wide tree is never deeper than the binary one. Triangle BVHs then get their leaves
 // packed into triangle blocks (pack_triangle_blocks).
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <cstddef>
@@ -20,7 +19,8 @@ import canopy.geometry;
 import :storage;
 import :parallel;
 
-export namespace canopy {
+// The builder's own steps: nothing here is exported.
+namespace canopy {
 
 namespace detail {
 

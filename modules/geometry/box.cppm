@@ -11,8 +11,7 @@
 // such a NaN drops out (the slab then holds the whole ray): conservative. NaN in tmin or
 // tmax makes every comparison fail: such rays miss.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <limits>
 #include <type_traits>

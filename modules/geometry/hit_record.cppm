@@ -3,10 +3,10 @@
 // For scalar rays `hit` is a bool and the ids are std::uint32_t; for SIMD rays (T = float8, ...)
 // `hit` is a mask and every field is a SIMD type with one lane per ray.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
+#include <canopy/check.hpp>
 #include <cstdint>
 #include <limits>
 #include <type_traits>
@@ -55,6 +55,9 @@ using hit_record = basic_hit_record<ray_value_t<Ray>>;
 
 // The ids of the instances a traversal has entered, outermost first: queries keep one and copy
 // it into the hit records they accept; hooks read the current one through instance_ids(ray).
+// Preconditions: at most max_instance_depth instances entered at once (the queries check the
+// nesting of the library's own structures at compile time; a structure of the user's own must
+// keep to it), and each leave_instance after its enter_instance.
 struct instance_path {
     // ids[k] for k < depth; the entries past depth hold invalid_id, so that stamping a record is a
     // plain copy.
@@ -67,8 +70,14 @@ struct instance_path {
 
     // (inline: member functions in a named module are not implicitly inline, and these run at
     // every instance entry.)
-    inline void enter_instance(std::uint32_t id) { ids[std::size_t(depth++)] = id; }
-    inline void leave_instance() { ids[std::size_t(--depth)] = invalid_id; }
+    inline void enter_instance(std::uint32_t id) {
+        CANOPY_DCHECK(depth < max_instance_depth, "enter_instance: instances nest deeper than max_instance_depth");
+        ids[std::size_t(depth++)] = id;
+    }
+    inline void leave_instance() {
+        CANOPY_DCHECK(depth > 0, "leave_instance: no instance entered");
+        ids[std::size_t(--depth)] = invalid_id;
+    }
 
     template <typename T>
     inline void stamp(basic_hit_record<T>& hr) const {

@@ -10,8 +10,7 @@
 // Points are in the triangle's own (object) space; for instanced geometry, transform the ray
 // afterwards or spawn from the world-space triangle.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <bit>
 #include <cmath>

@@ -4,8 +4,7 @@
 // of Haines et al., "Precision Improvements for Ray/Sphere Intersection", Ray Tracing Gems
 // (2019), ch. 7. Reports the nearest root in [tmin, tmax]; u, v are 0.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <cstdint>
 #include <type_traits>

@@ -17,8 +17,7 @@
 // Möller & Trumbore 1997 is kept as an opt-in (intersect_moller_trumbore): faster to set up, not
 // watertight.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <cstdint>
 #include <limits>

@@ -16,11 +16,11 @@
 // degenerate-triangle check (zero area, exact in double) is left to the caller, for the lanes it
 // reports, as the scalar test does it only for hits.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <bit>
+#include <canopy/check.hpp>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -48,13 +48,16 @@ struct alignas(64) triangle_block {
     std::uint32_t testable = 0; // bit i: lane i holds a triangle that is not degenerate
 
     // (inline: member functions in a named module are not implicitly inline.)
+    // lane in [0, triangle_block_width) for both.
     [[gnu::always_inline]] inline triangle triangle_at(int lane) const {
+        CANOPY_DCHECK(lane >= 0 && lane < triangle_block_width, "triangle_block: lane in [0, triangle_block_width)");
         auto const l = std::size_t(lane);
         auto const v = [&](std::size_t k) { return vec3<float>(vertex[k][0][l], vertex[k][1][l], vertex[k][2][l]); };
         return {v(0), v(1), v(2), prim_id[l], geom_id[l]};
     }
 
     inline void set(int lane, triangle const& t) {
+        CANOPY_DCHECK(lane >= 0 && lane < triangle_block_width, "triangle_block: lane in [0, triangle_block_width)");
         auto const l = std::size_t(lane);
         vec3<float> const v[3] = {t.v0, t.v1, t.v2};
         for (std::size_t k = 0; k < 3; ++k)

@@ -39,8 +39,7 @@
 //   hr.hit.set(k, ...)), as for the packet single-ray queries.
 // Each query returns batch_stats: how many packets and single rays it traced.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>
@@ -66,7 +65,9 @@ struct batch_stats {
 // The largest origin spread of a packet, as a fraction of the largest side of the scene's bounds.
 inline constexpr float batch_origin_spread = 1.0f / 64.0f;
 
-namespace detail {
+} // namespace canopy
+
+namespace canopy::detail {
 
 inline constexpr std::size_t batch_width = 8;
 using batch_packet = basic_ray<simd::float8>;
@@ -186,10 +187,12 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, Packet&& pac
     return stats;
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // Closest hit of every ray: out[i] is what closest_hit(rays[i], first, last, isect) returns.
-template <typename It, typename I = default_intersector>
+template <traceable_iterator It, typename I = default_intersector>
 batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<basic_hit_record<float>> out,
                         I&& isect = I{}) {
     detail::check_batch_sizes(rays.size(), out.size());
@@ -203,7 +206,7 @@ batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<
 }
 
 // Any hit of every ray: out[i] is what any_hit(rays[i], first, last, isect) returns.
-template <typename It, typename I = default_intersector>
+template <traceable_iterator It, typename I = default_intersector>
 batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basic_hit_record<float>> out,
                     I&& isect = I{}) {
     detail::check_batch_sizes(rays.size(), out.size());
@@ -217,7 +220,7 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basi
 }
 
 // Occlusion of every ray: out[i] is any_hit(rays[i], first, last, isect).hit.
-template <typename It, typename I = default_intersector>
+template <traceable_iterator It, typename I = default_intersector>
 batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<bool> out, I&& isect = I{}) {
     detail::check_batch_sizes(rays.size(), out.size());
     return detail::run_batch<std::remove_reference_t<I>>(
@@ -231,7 +234,7 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<bool
 
 // Up to N hits of every ray: out[i] is what multi_hit<N>(rays[i], first, last, isect) returns.
 // Traced one ray at a time.
-template <std::size_t N, typename It, typename I = default_intersector>
+template <std::size_t N, traceable_iterator It, typename I = default_intersector>
 batch_stats multi_hit(std::span<ray const> rays, It first, It last, std::span<std::array<basic_hit_record<float>, N>> out,
                       I&& isect = I{}) {
     detail::check_batch_sizes(rays.size(), out.size());

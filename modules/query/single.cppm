@@ -15,21 +15,19 @@
 // miss without being traced. Packet rays (basic_ray<float8>, …) are supported by closest_hit and
 // any_hit; such lanes are inactive and report misses.
 module;
-// No a·b + c → FMA contraction in this file, whatever -ffp-contract says: every build and
-// every path (scalar, SIMD, packet) rounds the same way.
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <iterator>
 #include <limits>
 #include <type_traits>
 #include <utility>
 export module canopy.query:single;
 export import canopy.bvh;
 
-export namespace canopy {
-
-namespace detail {
+namespace canopy::detail {
 
 // Unsigned a < b, lane-wise, for ids held in signed SIMD int lanes.
 template <typename I>
@@ -208,7 +206,9 @@ template <typename Ray, typename It, typename I, typename Query>
     }
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // A ray or a packet of rays (basic_ray<T>, prepared_ray<T>): what the single-ray queries take, so
 // that spans of rays go to the batch queries.
@@ -220,10 +220,15 @@ concept ray_like = requires(Ray const& r) {
     r.tmax;
 };
 
+// An iterator over what a query can trace: primitives, or structures holding them
+// (canopy.bvh:protocol, traceable).
+template <typename It>
+concept traceable_iterator = traceable<std::remove_cvref_t<std::iter_reference_t<It>>>;
+
 // The queries are inlined into the caller, as run_query is: the compiler otherwise keeps some
 // instances out of line (measured: +53 instructions per ray for closest_hit with no intersector,
 // the record returned through memory and the ray copied, against an intersector with a filter).
-template <ray_like Ray, typename It, typename I = default_intersector>
+template <ray_like Ray, traceable_iterator It, typename I = default_intersector>
 [[gnu::always_inline]] inline basic_hit_record<ray_value_t<Ray>> closest_hit(Ray const& ray, It first, It last,
                                                                              I&& isect = I{}) {
     using T = ray_value_t<Ray>;
@@ -237,7 +242,7 @@ template <ray_like Ray, typename It, typename I = default_intersector>
     return query.best;
 }
 
-template <ray_like Ray, typename It, typename I = default_intersector>
+template <ray_like Ray, traceable_iterator It, typename I = default_intersector>
 [[gnu::always_inline]] inline basic_hit_record<ray_value_t<Ray>> any_hit(Ray const& ray, It first, It last,
                                                                          I&& isect = I{}) {
     using T = ray_value_t<Ray>;
@@ -254,7 +259,7 @@ template <ray_like Ray, typename It, typename I = default_intersector>
 }
 
 // Up to N accepted hits sorted by t (ties as above); entries past the last hit have hit == false.
-template <std::size_t N, ray_like Ray, typename It, typename I = default_intersector>
+template <std::size_t N, ray_like Ray, traceable_iterator It, typename I = default_intersector>
 [[gnu::always_inline]] inline std::array<basic_hit_record<ray_value_t<Ray>>, N> multi_hit(Ray const& ray, It first,
                                                                                           It last, I&& isect = I{}) {
     static_assert(N > 0);

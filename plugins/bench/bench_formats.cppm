@@ -114,7 +114,9 @@ struct bench_alpha_hook_intersector : basic_intersector<bench_alpha_hook_interse
 // prim value of an any-hit result that does not say which primitive occluded.
 inline constexpr std::uint32_t occluded_unreported = 0xfffffffeu;
 
-namespace detail {
+} // namespace canopy
+
+namespace canopy::detail {
 
 [[noreturn]] inline void fail(std::filesystem::path const& file, std::size_t line, std::string const& what) {
     throw scene_error(file.string(), line_where(line), what);
@@ -134,7 +136,9 @@ inline std::string read_file(std::filesystem::path const& file, std::string cons
     return checked(file, [&] { return read_regular_file(file, role); });
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // The OBJ subset from text (no file is read; `file` names it in errors, also for fuzzing).
 inline bench_mesh parse_bench_obj(std::string_view content, std::filesystem::path const& file) {
@@ -248,7 +252,9 @@ inline std::uint64_t count_bench_rays(std::filesystem::path const& file) {
     return size / 32;
 }
 
-namespace detail {
+} // namespace canopy
+
+namespace canopy::detail {
 
 // Rays [first, first + count) of `in`, read in pieces straight into the rays (no second copy of
 // the file in memory); `size` is the file's, for messages.
@@ -283,7 +289,9 @@ inline std::ifstream open_rays(std::filesystem::path const& file) {
     return in;
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // A ray file, read in pieces straight into the rays (no second copy of the file in memory).
 inline std::vector<ray> read_bench_rays(std::filesystem::path const& file) {
@@ -305,7 +313,9 @@ inline std::vector<ray> read_bench_rays(std::filesystem::path const& file, std::
     return detail::read_rays(in, file, first, count, 32 * total);
 }
 
-namespace detail {
+} // namespace canopy
+
+namespace canopy::detail {
 
 // Writes `bytes` as the whole of `file`; a file that cannot be opened or written (a folder, a full
 // disk) is an error naming it.
@@ -320,7 +330,9 @@ inline void write_file(std::filesystem::path const& file, std::string const& byt
     if (!out) fail(file, 0, "cannot write: " + reason());
 }
 
-} // namespace detail
+} // namespace canopy::detail
+
+export namespace canopy {
 
 // The bytes of hits as a hit file holds them (20 per hit).
 inline std::string encode_bench_hits(std::span<bench_hit const> hits) {
