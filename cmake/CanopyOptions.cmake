@@ -35,4 +35,8 @@ if(CANOPY_SANITIZE)
   target_compile_options(canopy_isa INTERFACE "-fsanitize=${canopy_sanitizers}" -fno-omit-frame-pointer
                          -fno-sanitize-recover=all)
   target_link_options(canopy_isa INTERFACE "-fsanitize=${canopy_sanitizers}")
+  if(CANOPY_NO_SANITIZE)
+    list(JOIN CANOPY_NO_SANITIZE "," canopy_no_sanitizers)
+    target_compile_options(canopy_isa INTERFACE "-fno-sanitize=${canopy_no_sanitizers}")
+  endif()
 endif()

@@ -1,12 +1,11 @@
 #!/usr/bin/env bash
-# Builds the fuzzers in the asan preset (which compiles everything with libFuzzer's coverage for
-# them) and runs every scene-parser fuzzer (fuzz/: the list is the one
+# Builds the fuzz preset and runs every scene-parser fuzzer (fuzz/: the list is the one
 # fuzz/CMakeLists.txt writes to <build>/fuzz/fuzzers.txt) for a bounded time under ASan + UBSan;
 # fails on any crash, sanitizer report, leak, out-of-memory or slow input (libFuzzer exits
 # non-zero and leaves the input in the work folder's artifacts/).
 #   scripts/fuzz.sh [SECONDS]    total seconds for all fuzzers together, split evenly (default 120;
 #                                at least 10 s each)
-# The preset's build folder is build/asan. Inputs found interesting are kept
+# CANOPY_FUZZ_BUILD sets the build folder (default build/fuzz). Inputs found interesting are kept
 # in <build>/fuzz-work/<fuzzer>/corpus between runs; the committed seeds are fuzz/corpus/<fuzzer>,
 # the dictionaries fuzz/<fuzzer>.dict.
 set -euo pipefail
@@ -14,9 +13,9 @@ total=${1:-120}
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 source "$here/env.sh"
 cd "$canopy_root"
-build=build/asan
-cmake --preset asan >/dev/null
-cmake --build --preset asan --target fuzzers
+build=${CANOPY_FUZZ_BUILD:-build/fuzz}
+cmake --preset fuzz -B "$build" >/dev/null
+cmake --build "$build" -j2 --target fuzzers
 mapfile -t fuzzers < <(grep -v '^$' "$build/fuzz/fuzzers.txt")
 seconds=$(( total / ${#fuzzers[@]} ))
 (( seconds >= 10 )) || seconds=10
