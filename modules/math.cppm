@@ -306,6 +306,18 @@ template <std::floating_point T> constexpr int max_dimension(vec3<T> const& v) {
     return a.x > a.y ? (a.x > a.z ? 0 : 2) : (a.y > a.z ? 1 : 2);
 }
 
+// The components of v in lanes 0-2 of a 4-lane vector and `w` in lane 3, and back (lane 3
+// dropped): for code that treats the three axes of a point or a box at once.
+inline simd::float4 to_lanes(vec3<float> const& v, float w = 0.0f) {
+    alignas(16) float const lanes[4] = {v.x, v.y, v.z, w};
+    return simd::float4::load_aligned(lanes);
+}
+inline vec3<float> from_lanes(simd::float4 const& v) {
+    alignas(16) float lanes[4];
+    v.store_aligned(lanes);
+    return {lanes[0], lanes[1], lanes[2]};
+}
+
 // {v[kx], v[ky], v[kz]}; preconditions: each index in [0, 3).
 template <typename T> constexpr vec3<T> permute(vec3<T> const& v, int kx, int ky, int kz) {
     CANOPY_DCHECK(unsigned(kx) < 3u && unsigned(ky) < 3u && unsigned(kz) < 3u, "permute: indices in [0, 3)");

@@ -105,9 +105,8 @@ void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::siz
             boxes[k] = {float4(inf), float4(-inf)};
             counts[k] = 0;
         }
-        alignas(16) float const lo_lanes[4] = {binning.lo[0], binning.lo[1], binning.lo[2], 0.0f};
-        alignas(16) float const scale_lanes[4] = {binning.scale[0], binning.scale[1], binning.scale[2], 0.0f};
-        float4 const lo = float4::load_aligned(lo_lanes), scale = float4::load_aligned(scale_lanes);
+        float4 const lo = to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]));
+        float4 const scale = to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]));
         float4 const last(float(binning.bins - 1));
         int4 const first_of_axis = int4::iota() * int4(binning.bins);
         for (std::size_t i = begin; i < end; ++i) {
@@ -229,12 +228,8 @@ void side_bounds_vector(centroid_bins<S> const& binning, bin_scratch<S> const& s
         side.lo = simd::min(b[k].lo, side.lo);
         side.hi = simd::max(b[k].hi, side.hi);
     }
-    for (int i = 0; i < 2; ++i) {
-        alignas(16) float l[4], h[4];
-        sides[i].lo.store_aligned(l);
-        sides[i].hi.store_aligned(h);
-        (i == 0 ? left : right) = {vec3<float>(l[0], l[1], l[2]), vec3<float>(h[0], h[1], h[2])};
-    }
+    left = {from_lanes(sides[0].lo), from_lanes(sides[0].hi)};
+    right = {from_lanes(sides[1].lo), from_lanes(sides[1].hi)};
 }
 
 // Builds the subtree of refs[begin, end) into nodes[node_index]; `range` holds the bounds of

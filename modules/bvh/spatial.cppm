@@ -204,17 +204,21 @@ void bin_reference_parts(basic_triangle<S> const& tri, basic_aabb<S> const& box,
                          S scale, int first, int last, basic_aabb<S>* boxes, basic_aabb<S>* parts) {
     for (int k = first; k <= last; ++k) parts[k] = {};
     vec3<S> const v[3] = {tri.v0, tri.v1, tri.v2};
-    for (auto const& p : v) {
-        int const k = std::clamp(plane_bin(p[axis], planes, bins, scale), first, last);
-        parts[k] = extend(parts[k], p);
+    int vertex_bin[3]; // each vertex's bin, found once for the vertex and the edges from it
+    for (int i = 0; i < 3; ++i) {
+        vertex_bin[i] = plane_bin(v[i][axis], planes, bins, scale);
+        int const k = std::clamp(vertex_bin[i], first, last);
+        parts[k] = extend(parts[k], v[i]);
     }
     for (int i = 0; i < 3; ++i) {
-        vec3<S> p = v[i], q = v[(i + 1) % 3];
-        if (q[axis] < p[axis]) std::swap(p, q);
+        int lower = i, upper = (i + 1) % 3;
+        if (v[upper][axis] < v[lower][axis]) std::swap(lower, upper);
+        vec3<S> const& p = v[lower];
+        vec3<S> const& q = v[upper];
         if (!(p[axis] < q[axis])) continue; // in one plane across the axis: its vertices bound it
         S const run = q[axis] - p[axis];
         vec3<S> const d = q - p;
-        for (int k = std::max(first, plane_bin(p[axis], planes, bins, scale)); k < last; ++k) {
+        for (int k = std::max(first, vertex_bin[lower]); k < last; ++k) {
             S const plane = planes[k + 1];
             if (!(plane < q[axis])) break;
             if (!(plane > p[axis])) continue;

@@ -119,10 +119,6 @@ void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector
             for (std::size_t i = begin; i < end; ++i) {
                 auto& block = b.blocks[first_block[k] + (i - begin) / triangle_block_width];
                 int const lane = int((i - begin) % triangle_block_width);
-                if (lane == 0) {
-                    block.prim_id.fill(invalid_id);
-                    block.geom_id.fill(invalid_id);
-                }
                 Prim t = prims[order[i]];
                 t.prim_id = order[i];
                 block.set(lane, t);

@@ -186,27 +186,18 @@ template <typename T, typename S>
         // operations lane by lane as the two functions, so the same bits in a third of the
         // instructions. Paid once per ray and per instance entered.
         using simd::float4;
-        auto const lanes = [](vec3<float> const& v) {
-            alignas(16) float const l[4] = {v.x, v.y, v.z, 0.0f};
-            return float4::load_aligned(l);
-        };
-        float4 const o = lanes(ray.origin), inv = lanes(inv_dir);
-        float4 const m = simd::max(simd::abs(lanes(bounds.min) - o), simd::abs(lanes(bounds.max) - o));
+        float4 const o = to_lanes(ray.origin), inv = to_lanes(inv_dir);
+        float4 const m = simd::max(simd::abs(to_lanes(bounds.min) - o), simd::abs(to_lanes(bounds.max) - o));
         float4 const delta(simd::reduce_max(m) * float(1.0 / 524288.0));
         float4 const move = simd::max(delta, simd::abs(o) * float4(float(1.0 / 2097152.0)));
         float4 const towards_near = simd::select(inv < float4(0.0f), -move, move);
         float4 const near = o + towards_near, far = o - towards_near;
         float4 const near_offset = near * inv, far_offset = far * inv;
         float4 const finite = (inv - inv) + (near_offset - near_offset) + (far_offset - far_offset);
-        alignas(16) float out[4][4];
-        near.store_aligned(out[0]);
-        far.store_aligned(out[1]);
-        near_offset.store_aligned(out[2]);
-        far_offset.store_aligned(out[3]);
-        near_origin = {out[0][0], out[0][1], out[0][2]};
-        far_origin = {out[1][0], out[1][1], out[1][2]};
-        slabs.near_offset = {out[2][0], out[2][1], out[2][2]};
-        slabs.far_offset = {out[3][0], out[3][1], out[3][2]};
+        near_origin = from_lanes(near);
+        far_origin = from_lanes(far);
+        slabs.near_offset = from_lanes(near_offset);
+        slabs.far_offset = from_lanes(far_offset);
         slabs.usable = (simd::movemask(finite == float4(0.0f)) & 7u) == 7u;
     } else {
         box_margin_origins(ray, inv_dir, bounds, near_origin, far_origin);

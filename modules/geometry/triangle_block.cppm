@@ -43,8 +43,10 @@ struct alignas(64) triangle_block {
     using lanes = std::array<float, triangle_block_width>;
     // vertex[k][c][lane]: component c (x, y, z) of vertex k (v0, v1, v2).
     std::array<std::array<lanes, 3>, 3> vertex;
-    std::array<std::uint32_t, triangle_block_width> prim_id;
-    std::array<std::uint32_t, triangle_block_width> geom_id;
+    // A block made with {} (or by a vector's resize) holds no triangle: zero vertices, invalid ids,
+    // no lane testable; set() fills a lane.
+    std::array<std::uint32_t, triangle_block_width> prim_id = invalid_ids();
+    std::array<std::uint32_t, triangle_block_width> geom_id = invalid_ids();
     std::uint32_t testable = 0; // bit i: lane i holds a triangle that is not degenerate
 
     // (inline: member functions in a named module are not implicitly inline.)
@@ -54,6 +56,12 @@ struct alignas(64) triangle_block {
         auto const l = std::size_t(lane);
         auto const v = [&](std::size_t k) { return vec3<float>(vertex[k][0][l], vertex[k][1][l], vertex[k][2][l]); };
         return {v(0), v(1), v(2), prim_id[l], geom_id[l]};
+    }
+
+    static constexpr std::array<std::uint32_t, triangle_block_width> invalid_ids() {
+        std::array<std::uint32_t, triangle_block_width> ids;
+        ids.fill(invalid_id);
+        return ids;
     }
 
     inline void set(int lane, triangle const& t) {
@@ -78,8 +86,6 @@ void append_triangle_blocks(std::vector<triangle_block>& blocks, It first, It la
     for (int lane = triangle_block_width; first != last; ++first, ++lane) {
         if (lane == triangle_block_width) {
             blocks.push_back({});
-            blocks.back().prim_id.fill(invalid_id);
-            blocks.back().geom_id.fill(invalid_id);
             lane = 0;
         }
         blocks.back().set(lane, *first);
