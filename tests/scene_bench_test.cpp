@@ -24,7 +24,6 @@
 #include "test_support.hpp"
 
 import canopy.scene;
-import canopy.bench_formats;
 import canopy.procedural;
 import canopy.plugins.bench;
 

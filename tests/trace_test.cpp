@@ -26,7 +26,7 @@
 #include "test_support.hpp"
 
 import canopy.query;
-import canopy.bench_formats;
+import canopy.plugins.bench;
 import canopy.procedural;
 import canopy.image_io;
 import canopy.plugins;

@@ -1,5 +1,6 @@
 // canopy.plugins.bench — the benchmark scene formats (bench/FORMATS.md of the shared
-// specification) as scene-graph content, read by canopy.bench_formats.
+// specification) as scene-graph content; its partition :formats (bench_formats.cppm, exported)
+// reads and writes the files.
 //
 // Loads:
 //   .inst  one shared mesh (the `mesh PATH` line, an .obj of the subset below) and one instance
@@ -31,7 +32,7 @@ module;
 #include <utility>
 export module canopy.plugins.bench;
 import canopy.scene;
-import canopy.bench_formats;
+export import :formats;
 
 export namespace canopy {
 
