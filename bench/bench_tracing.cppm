@@ -18,10 +18,9 @@ module;
 #include <vector>
 export module canopy.bench_tracing;
 export import canopy;
-export import canopy.bench_formats;
 export import canopy.bench_scenes;
+export import canopy.plugins.bench; // with the format readers and writers (:formats)
 export import canopy.scene;
-import canopy.plugins.bench;
 
 export namespace canopy::bench {
 

@@ -1,4 +1,4 @@
-// libFuzzer target: canopy.bench_formats' readers on arbitrary bytes: the OBJ subset, the .inst
+// libFuzzer target: the bench plugin's format readers (canopy.plugins.bench:formats) on arbitrary bytes: the OBJ subset, the .inst
 // text (its mesh is not read: parse_bench_inst), ray files and hit files.
 //
 // Bad input must end in a scene_error; anything else (a crash, a sanitizer report, another
@@ -12,7 +12,7 @@
 
 import canopy.math;
 import canopy.scene;
-import canopy.bench_formats;
+import canopy.plugins.bench;
 
 namespace {
 

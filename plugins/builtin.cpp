@@ -15,8 +15,10 @@ import canopy.plugins.gltf;
 namespace canopy {
 
 void register_builtin_plugins(registry& r) {
-    register_bench_plugin(r); // first: the general .obj loaders registered later are the default
-    register_openmesh_plugin(r); // before obj: the obj plugin is the default for .obj
+    // In any order: an extension's default loader is chosen by the rank each loader registers with
+    // (canopy.scene:registry's loader_rank), e.g. obj for .obj, with bench and openmesh as alternatives.
+    register_bench_plugin(r);
+    register_openmesh_plugin(r);
     register_procedural_plugin(r);
     register_oiio_plugin(r);
     register_obj_plugin(r);

@@ -25,7 +25,7 @@ std::vector<registered> list(Map const& m) {
     for (auto const& [key, e] : m) {
         if constexpr (requires { e.info; }) out.push_back(e.info);
         else
-            for (auto it = e.rbegin(); it != e.rend(); ++it) out.push_back(it->info); // default first
+            for (auto const& x : e) out.push_back(x.info); // default first
     }
     return out;
 }
@@ -56,11 +56,15 @@ auto with_rollback(scene& s, F&& f) {
 
 std::string extension_of(std::filesystem::path const& file) { return lower(file.extension().string()); }
 
-void registry::add_loader(std::string extension, std::string plugin, std::string description, file_loader f) {
+void registry::add_loader(std::string extension, std::string plugin, std::string description, file_loader f,
+                          loader_rank rank) {
     extension = normalise_extension(std::move(extension));
     auto& list = loaders_[extension];
     std::erase_if(list, [&](auto const& e) { return e.info.plugin == plugin; });
-    list.push_back({{extension, std::move(plugin), std::move(description)}, std::move(f)});
+    // Kept in the order of choice: the default first.
+    auto const before = [&](auto const& e) { return e.rank > rank || (e.rank == rank && e.info.plugin < plugin); };
+    auto const at = std::find_if_not(list.begin(), list.end(), before);
+    list.insert(at, {{extension, std::move(plugin), std::move(description)}, std::move(f), rank});
 }
 
 void registry::add_image_loader(std::string extension, std::string plugin, image_loader f) {
@@ -104,7 +108,7 @@ node_id registry::load(scene& s, std::filesystem::path const& file, node_id pare
                           (ext.empty() ? std::string("has no extension") : "unknown extension '" + excerpt(ext) + "'") +
                               " (known: " + (known.empty() ? "none" : known) + ")");
     }
-    entry<file_loader> const* chosen = &it->second.back();
+    loader_entry const* chosen = &it->second.front();
     if (!plugin.empty()) {
         chosen = nullptr;
         std::string offered;

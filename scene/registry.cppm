@@ -2,8 +2,10 @@
 //
 // A plugin adds any of:
 //   file loaders     by extension (".ply"): load a file into a scene under a parent node; several
-//                    plugins may load one extension: the last registered is the default, the
-//                    others are chosen by plugin name (load(s, file, parent, "openmesh"))
+//                    plugins may load one extension: each says at registration how it ranks
+//                    (loader_rank), the highest is the default, the others are chosen by plugin
+//                    name (load(s, file, parent, "openmesh")); the order of registration does
+//                    not matter
 //   image loaders    by extension (".png"): read a texture into an image_data
 //   generators       by name ("icosphere"): build geometry from parameters, deterministic in them
 //   node types       by name: a custom node that compile() expands into standard nodes
@@ -39,7 +41,16 @@ import :graph;
 export namespace canopy {
 
 // Version of the plugin interface (registry and scene types); raised on every incompatible change.
-inline constexpr unsigned plugin_abi_version = 2;
+inline constexpr unsigned plugin_abi_version = 3;
+
+// How a file loader ranks among the loaders of its extension. The extension's default loader is
+// the one of highest rank; among equal ranks, the plugin whose name sorts first. The others are
+// chosen by plugin name. The order in which plugins register never decides.
+enum class loader_rank : std::uint8_t {
+    alternative, // a second reader, asked for by name (the bench plugin's strict .obj subset, openmesh's .obj)
+    standard,    // the extension's own reader (every built-in loader but the alternatives)
+    preferred,   // a reader meant to replace the standard one (e.g. from a plugin loaded at run time)
+};
 
 class registry;
 
@@ -66,7 +77,9 @@ struct registered {
 
 class registry {
 public:
-    void add_loader(std::string extension, std::string plugin, std::string description, file_loader f);
+    // A plugin that registers a loader for an extension again replaces its earlier one.
+    void add_loader(std::string extension, std::string plugin, std::string description, file_loader f,
+                    loader_rank rank = loader_rank::standard);
     void add_image_loader(std::string extension, std::string plugin, image_loader f);
     void add_generator(std::string name, std::string plugin, std::string description, generator f);
     // A custom node type: `expand` builds the node's content under the node itself (parent = the
@@ -93,7 +106,7 @@ public:
     bool has_loader(std::string_view extension) const;
     bool has_generator(std::string_view name) const { return generators_.contains(std::string(name)); }
     bool has_node_type(std::string_view name) const { return node_types_.contains(std::string(name)); }
-    std::vector<registered> loaders() const;
+    std::vector<registered> loaders() const; // per extension, the default first, then by rank and name
     std::vector<registered> image_loaders() const;
     std::vector<registered> generators() const;
     std::vector<registered> node_types() const;
@@ -112,7 +125,12 @@ private:
         registered info;
         F function;
     };
-    std::map<std::string, std::vector<entry<file_loader>>> loaders_; // last = default
+    struct loader_entry {
+        registered info;
+        file_loader function;
+        loader_rank rank;
+    };
+    std::map<std::string, std::vector<loader_entry>> loaders_; // by rank (highest first), then plugin name
     std::map<std::string, entry<image_loader>> image_loaders_;
     std::map<std::string, entry<generator>> generators_;
     std::map<std::string, entry<node_expander>> node_types_;

@@ -7,8 +7,8 @@
 //   resolve_obj_index(part, corner, n, ...)   // 1-based or negative (relative) OBJ index → 0-based
 //   read_obj_corner(token, counts, ...)       // v, v/vt, v//vn, v/vt/vn, each index resolved
 //
-// Used by the benchmark formats (canopy.bench_formats: the OBJ subset, .inst), the OBJ and MTL
-// reader (canopy.plugins.obj) and the checks of OpenMesh's text formats (canopy.plugins.openmesh).
+// Used by the benchmark formats (canopy.plugins.bench:formats: the OBJ subset, .inst), the OBJ and
+// MTL reader (canopy.plugins.obj) and the checks of OpenMesh's text formats (canopy.plugins.openmesh).
 //
 // The rules (where the readers once differed, the strict one was kept):
 //   blanks       space, tab, CR, VT and FF separate tokens; a line ends at LF. Text is checked to be

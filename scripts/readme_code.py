@@ -105,12 +105,12 @@ def write(readme, root, out):
                           encoding="utf-8")
         if marker == "program":
             cmake.append(f'add_executable({name} "{source.resolve()}")')
-            cmake.append(f"target_link_libraries({name} PRIVATE canopy::canopy canopy::canopy_cpu_guard)")
+            cmake.append(f"target_link_libraries({name} PRIVATE canopy::canopy canopy::canopy_procedural canopy::canopy_cpu_guard)")
             cmake.append(f"target_compile_options({name} PRIVATE ${{readme_warnings}})")
             programs.append(name)
         else:
             cmake.append(f'add_library({name} OBJECT "{source.resolve()}")')
-            cmake.append(f"target_link_libraries({name} PRIVATE canopy::canopy)")
+            cmake.append(f"target_link_libraries({name} PRIVATE canopy::canopy canopy::canopy_procedural)")
             cmake.append(f"target_compile_options({name} PRIVATE ${{readme_warnings}})")
     (out / "blocks.cmake").write_text("\n".join(cmake) + "\n", encoding="utf-8")
     (out / "programs.txt").write_text("".join(p + "\n" for p in programs), encoding="utf-8")

@@ -18,9 +18,7 @@
 #include <vector>
 
 import canopy.query;
-
-#include "random_support.hpp"
-#include "nested_scene.hpp"
+import canopy.testing;
 
 namespace {
 

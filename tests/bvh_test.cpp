@@ -16,11 +16,8 @@
 #include <utility>
 #include <vector>
 
-#include "test_support.hpp"
-
 import canopy.query;
-
-#include "random_support.hpp"
+import canopy.testing;
 
 namespace {
 

@@ -15,8 +15,7 @@
 #include <vector>
 
 import canopy.geometry;
-
-#include "random_support.hpp"
+import canopy.testing;
 
 namespace {
 
@@ -499,7 +498,6 @@ TEST_CASE("double-precision triangles and rays") {
 }
 
 namespace {
-
 
 template <typename Packet, typename Scalar>
 void check_lane_equals_scalar(Packet const& packet, int lane, Scalar const& scalar) {

@@ -14,9 +14,7 @@
 #include <vector>
 
 import canopy.query;
-
-#include "random_support.hpp"
-#include "nested_scene.hpp"
+import canopy.testing;
 
 using canopy::aabb;
 using canopy::basic_triangle;
@@ -99,7 +97,6 @@ struct overload_set : F... {
 };
 template <typename... F>
 overload_set(F...) -> overload_set<F...>;
-
 
 // The same alpha mask written with and without the using-declaration.
 struct alpha_mask : canopy::basic_intersector<alpha_mask> {

@@ -7,9 +7,9 @@
 #include <vector>
 
 #include "../modules/isa/cpu_features.hpp"
-#include "test_support.hpp"
 
 import canopy.simd;
+import canopy.testing;
 
 namespace {
 

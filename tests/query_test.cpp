@@ -17,9 +17,7 @@
 #include <vector>
 
 import canopy.query;
-
-#include "random_support.hpp"
-#include "nested_scene.hpp"
+import canopy.testing;
 
 namespace {
 
@@ -134,7 +132,6 @@ void require_agreement(query_agreement const& a, int min_hits) {
     CHECK(a.any_mismatches == 0);
     CHECK(a.multi_mismatches == 0);
 }
-
 
 struct alpha_mask : canopy::basic_intersector<alpha_mask> {
     using canopy::basic_intersector<alpha_mask>::operator();
@@ -757,7 +754,6 @@ TEST_CASE("any_hit stops the whole traversal at the first accepted hit, through 
 }
 
 namespace {
-
 
 template <typename Packet>
 bool lane_equals(Packet const& p, int lane, record const& s) {

@@ -21,14 +21,10 @@
 #include <string>
 #include <vector>
 
-#include "test_support.hpp"
-
 import canopy.scene;
-import canopy.bench_formats;
 import canopy.procedural;
 import canopy.plugins.bench;
-
-#include "scene_support.hpp"
+import canopy.testing;
 
 namespace {
 
@@ -82,8 +78,16 @@ std::vector<std::array<float, 12>> instance_rows() {
     };
 }
 
-fs::path write_inst(fs::path const& folder, std::size_t& triangles) {
-    write(folder / "sphere.obj", sphere_obj(triangles));
+// A temporary folder holding sphere.obj, the icosphere of sphere_obj (`triangles` of them).
+struct sphere_folder {
+    temp_folder tmp{"canopy_scene_bench_test"};
+    fs::path const& folder = tmp.path;
+    std::size_t triangles = 0;
+    sphere_folder() { write(folder / "sphere.obj", sphere_obj(triangles)); }
+};
+
+// spheres.inst, next to the fixture's sphere.obj: one instance per row of instance_rows().
+fs::path write_inst(fs::path const& folder) {
     std::string text = "# five spheres\nmesh sphere.obj\n";
     for (auto const& rows : instance_rows()) {
         for (float v : rows) text += number(v) + " ";
@@ -114,16 +118,14 @@ std::vector<canopy::ray> random_rays(std::uint32_t seed, std::size_t count) {
 } // namespace
 
 TEST_CASE(".inst loads one shared mesh and one instance node per matrix line, in file order") {
-    temp_folder const tmp("canopy_scene_bench_test");
-    fs::path const& folder = tmp.path;
-    std::size_t triangles = 0;
-    auto const file = write_inst(folder, triangles);
+    sphere_folder const sphere;
+    auto const file = write_inst(sphere.folder);
     auto const r = bench_registry();
     canopy::scene s;
     canopy::node_id const group = r.load(s, file);
     CHECK(s.at(group).name == "spheres.inst");
     REQUIRE(s.meshes().size() == 1);
-    CHECK(s.meshes()[0].triangles.size() == triangles);
+    CHECK(s.meshes()[0].triangles.size() == sphere.triangles);
     auto const rows = instance_rows();
     REQUIRE(s.at(group).children.size() == rows.size());
     canopy::node_id prototype = canopy::no_node;
@@ -151,10 +153,8 @@ TEST_CASE(".inst loads one shared mesh and one instance node per matrix line, in
 }
 
 TEST_CASE(".inst through compile() gives the direct bench path's closest hits, ray by ray") {
-    temp_folder const tmp("canopy_scene_bench_test");
-    fs::path const& folder = tmp.path;
-    std::size_t triangles = 0;
-    auto const file = write_inst(folder, triangles);
+    sphere_folder const sphere;
+    auto const file = write_inst(sphere.folder);
     auto const r = bench_registry();
     canopy::compiled_scene const c = canopy::compile(canopy::load_scene(file, r));
 
@@ -206,10 +206,8 @@ TEST_CASE(".inst through compile() gives the direct bench path's closest hits, r
 }
 
 TEST_CASE("keep_single_instance: hits report inst as the bench formats say, with no extra level for an .obj") {
-    temp_folder const tmp("canopy_scene_bench_test");
-    fs::path const& folder = tmp.path;
-    std::size_t triangles = 0;
-    write(folder / "sphere.obj", sphere_obj(triangles));
+    sphere_folder const sphere;
+    fs::path const& folder = sphere.folder;
     write(folder / "one.inst", "mesh sphere.obj\n1 0 0 0  0 1 0 0  0 0 1 0\n");
     write(folder / "moved.inst", "mesh sphere.obj\n1 0 0 0  0 1 0 0  0 0 1 0\n1 0 0 0  0 1 0 0  0 0 1 -5\n");
     auto const r = bench_registry();
@@ -269,12 +267,11 @@ TEST_CASE("keep_single_instance: hits report inst as the bench formats say, with
 }
 
 TEST_CASE("bench .obj loads the strict subset: prim_id is the f line order") {
-    temp_folder const tmp("canopy_scene_bench_test");
-    fs::path const& folder = tmp.path;
-    std::size_t triangles = 0;
-    write(folder / "sphere.obj", sphere_obj(triangles));
+    sphere_folder const sphere;
+    fs::path const& folder = sphere.folder;
     auto r = bench_registry();
-    // A general OBJ loader registered later is the default; "bench" still picks this one.
+    // A general OBJ loader (of standard rank) is the default over bench's, an alternative; "bench"
+    // still picks this one.
     r.add_loader(".obj", "other", "a stand-in general loader", [](canopy::scene&, fs::path const&, canopy::node_id, canopy::registry const&) -> canopy::node_id {
         throw canopy::scene_error("", "", "the other loader");
     });
@@ -282,7 +279,7 @@ TEST_CASE("bench .obj loads the strict subset: prim_id is the f line order") {
     CHECK(std::string(error_of([&] { r.load(s, folder / "sphere.obj"); }).what()).find("the other loader") != std::string::npos);
     r.load(s, folder / "sphere.obj", s.root(), "bench");
     REQUIRE(s.meshes().size() == 1);
-    CHECK(s.meshes()[0].triangles.size() == triangles);
+    CHECK(s.meshes()[0].triangles.size() == sphere.triangles);
 
     canopy::compiled_scene const c = canopy::compile(s);
     CHECK(c.levels == 0);
@@ -309,10 +306,8 @@ TEST_CASE("bench .obj loads the strict subset: prim_id is the f line order") {
 }
 
 TEST_CASE("malformed bench files are scene errors naming the file at fault and the line") {
-    temp_folder const tmp("canopy_scene_bench_test");
-    fs::path const& folder = tmp.path;
-    std::size_t triangles = 0;
-    write(folder / "sphere.obj", sphere_obj(triangles));
+    sphere_folder const sphere;
+    fs::path const& folder = sphere.folder;
     write(folder / "quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
     write(folder / "index.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\nf 1 2 7\n");
     write(folder / "empty.obj", "# nothing\nv 0 0 0\n");

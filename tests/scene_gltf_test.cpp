@@ -19,15 +19,12 @@
 #include <string>
 #include <vector>
 
-#include "test_support.hpp"
-
 import canopy.scene;
 import canopy.image_io;
 import canopy.plugins.oiio;
 import canopy.plugins.gltf;
 import canopy.plugins;
-
-#include "scene_support.hpp"
+import canopy.testing;
 
 namespace {
 
@@ -642,7 +639,6 @@ TEST_CASE("bad glTF files give errors naming the file and the element") {
         expect(f.write(dir.path / "draco.gltf"), {"KHR_draco_mesh_compression"});
     }
 }
-
 
 // ---- Debian's assimp-testmodels (the glTF Asset Generator and deliberately broken files) ----------
 

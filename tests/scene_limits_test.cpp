@@ -15,13 +15,10 @@
 #include <string>
 #include <vector>
 
-#include "test_support.hpp"
-
 import canopy.scene;
 import canopy.plugins.json;
 import canopy.plugins.gltf;
-
-#include "scene_support.hpp"
+import canopy.testing;
 
 namespace {
 

@@ -19,14 +19,11 @@
 #include <vector>
 #include <sys/stat.h>
 
-#include "test_support.hpp"
-
 import canopy.scene;
 import canopy.plugins.obj;
 import canopy.plugins.oiio;
 import canopy.image_io;
-
-#include "scene_support.hpp"
+import canopy.testing;
 
 namespace {
 

@@ -28,12 +28,9 @@
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 
-#include "test_support.hpp"
-
 import canopy.scene;
 import canopy.plugins.openmesh;
-
-#include "scene_support.hpp"
+import canopy.testing;
 
 namespace {
 

@@ -5,10 +5,13 @@
 // compiled rays hit it as a brute-force double-precision loop over the generated triangles does.
 // Failures are scene errors naming the file: a file that is not a shared library, a shared library
 // without the entry point, a missing path; a plugin called with another ABI version refuses.
+// The built-in .obj loaders give the same default (obj; bench and openmesh by name) registered in
+// any order.
 #include <catch2/catch.hpp>
 
 #include <dlfcn.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -20,14 +23,15 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
-
-#include "test_support.hpp"
 
 import canopy.scene;
 import canopy.plugins;
-
-#include "scene_support.hpp"
+import canopy.plugins.bench;
+import canopy.plugins.obj;
+import canopy.plugins.openmesh;
+import canopy.testing;
 
 namespace {
 
@@ -258,4 +262,41 @@ TEST_CASE("the entry point refuses another ABI version and leaves the registry u
     // reference once r is gone).
     r = canopy::registry{};
     CHECK(dlclose(handle) == 0);
+}
+
+TEST_CASE("the built-in .obj loaders: obj is the default and bench and openmesh are asked for by name, in any order") {
+    temp_folder const tmp("canopy_scene_plugin_test");
+    // A quad (the bench subset refuses it) with a material (only the obj plugin reads it).
+    tmp.write("red.mtl", "newmtl red\nKd 1 0 0\n");
+    fs::path const quad = tmp.write("quad.obj", "mtllib red.mtl\nusemtl red\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
+    using registration = void (*)(canopy::registry&);
+    std::array<std::pair<std::string, registration>, 3> plugins{{{"bench", canopy::register_bench_plugin},
+                                                                 {"obj", canopy::register_obj_plugin},
+                                                                 {"openmesh", canopy::register_openmesh_plugin}}};
+    auto const obj_loaders = [](canopy::registry const& r) {
+        std::string order;
+        for (auto const& l : r.loaders())
+            if (l.name == ".obj") order += (order.empty() ? "" : " ") + l.plugin;
+        return order;
+    };
+    int orders = 0;
+    do {
+        canopy::registry r;
+        for (auto const& p : plugins) p.second(r);
+        INFO("registered in the order " << plugins[0].first << " " << plugins[1].first << " " << plugins[2].first);
+        CHECK(obj_loaders(r) == "obj bench openmesh");
+        canopy::scene s;
+        r.load(s, quad);
+        CHECK(s.materials().size() == 1);
+        CHECK(s.meshes().size() == 1);
+        CHECK(error_of([&] { r.load(s, quad, s.root(), "bench"); }).problem().find("only triangles") != std::string::npos);
+        canopy::scene t;
+        r.load(t, quad, t.root(), "openmesh");
+        CHECK(t.materials().empty());
+        CHECK(t.meshes().size() == 1);
+        ++orders;
+    } while (std::next_permutation(plugins.begin(), plugins.end(),
+                                   [](auto const& a, auto const& b) { return a.first < b.first; }));
+    CHECK(orders == 6);
+    CHECK(obj_loaders(canopy::builtin_registry()) == "obj bench openmesh");
 }

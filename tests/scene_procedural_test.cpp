@@ -20,8 +20,7 @@
 
 import canopy.scene;
 import canopy.plugins.procedural;
-
-#include "scene_support.hpp"
+import canopy.testing;
 
 namespace {
 

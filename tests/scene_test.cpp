@@ -1,4 +1,5 @@
-// Tests of canopy.scene: the scene graph's input checks, the registry's loading rules, and
+// Tests of canopy.scene: the scene graph's input checks, the registry's loading rules (an
+// extension's default loader chosen by rank, in every order of registration), and
 // compile()'s skip rules — each rule observable in the statistics and in the result. Hits of
 // compiled scenes are checked against a brute-force loop over every placed triangle in world
 // space, with the placements' transforms composed by hand in double precision.
@@ -18,12 +19,9 @@
 #include <vector>
 #include <sys/stat.h>
 
-#include "test_support.hpp"
-
 import canopy.scene;
 import canopy.procedural;
-
-#include "scene_support.hpp"
+import canopy.testing;
 
 namespace {
 
@@ -486,6 +484,58 @@ TEST_CASE("the registry loads by extension, names what it knows, and rolls back 
     CHECK(message_of([&] { r.generate(s, "forest", {}); }).find("generator 'forest': is not registered") !=
           std::string::npos);
     CHECK(message_of([&] { r.load_plugin(dir / "bad.TRI"); }).find("cannot load plugin") != std::string::npos);
+}
+
+TEST_CASE("an extension's default loader is the one of highest rank, whatever the order of registration") {
+    // Each loader makes a group named after its plugin. Ranked: preferred "omega"; standard
+    // "beta", "zeta" (equal: "beta" sorts first); alternative "alpha", "gamma".
+    struct loader {
+        std::string plugin;
+        canopy::loader_rank rank;
+    };
+    std::vector<loader> loaders{{"zeta", canopy::loader_rank::standard},
+                                {"alpha", canopy::loader_rank::alternative},
+                                {"beta", canopy::loader_rank::standard},
+                                {"gamma", canopy::loader_rank::alternative}};
+    auto const by_plugin = [](loader const& a, loader const& b) { return a.plugin < b.plugin; };
+    std::sort(loaders.begin(), loaders.end(), by_plugin);
+    test_support::temp_folder const tmp("canopy_scene_test");
+    std::filesystem::path const file = tmp.write("mesh.tri", "1 2 3\n");
+    auto const group_named_after = [](std::string name) {
+        return [name](canopy::scene& s, std::filesystem::path const&, node_id parent, canopy::registry const&) {
+            return s.add_group(parent, name);
+        };
+    };
+    auto const default_of = [&](canopy::registry const& r) {
+        canopy::scene s;
+        return s.at(r.load(s, file)).name;
+    };
+    auto const order_of = [](canopy::registry const& r) {
+        std::string order;
+        for (auto const& l : r.loaders()) order += (order.empty() ? "" : " ") + l.plugin;
+        return order;
+    };
+    int orders = 0;
+    do {
+        canopy::registry r;
+        for (auto const& l : loaders) r.add_loader(".tri", l.plugin, "a group named after its plugin", group_named_after(l.plugin), l.rank);
+        INFO("registered in the order " << loaders[0].plugin << " " << loaders[1].plugin << " " << loaders[2].plugin << " "
+                                        << loaders[3].plugin);
+        CHECK(default_of(r) == "beta");
+        CHECK(order_of(r) == "beta zeta alpha gamma");
+        canopy::scene s;
+        CHECK(s.at(r.load(s, file, s.root(), "gamma")).name == "gamma");
+        CHECK(message_of([&] { r.load(s, file, s.root(), "delta"); }) ==
+              file.string() + ": plugin 'delta' does not load '.tri' files (beta zeta alpha gamma do)");
+        // Registering again replaces a plugin's loader, rank included.
+        r.add_loader(".tri", "beta", "now an alternative", group_named_after("beta"), canopy::loader_rank::alternative);
+        CHECK(default_of(r) == "zeta");
+        CHECK(order_of(r) == "zeta alpha beta gamma");
+        r.add_loader(".tri", "omega", "preferred", group_named_after("omega"), canopy::loader_rank::preferred);
+        CHECK(default_of(r) == "omega");
+        ++orders;
+    } while (std::next_permutation(loaders.begin(), loaders.end(), by_plugin));
+    CHECK(orders == 24);
 }
 
 TEST_CASE("custom nodes are expanded by their registered type, and refused without one") {

@@ -23,8 +23,7 @@
 
 import canopy.query;
 import canopy.procedural;
-
-#include "stress_support.hpp"
+import canopy.testing;
 
 namespace {
 

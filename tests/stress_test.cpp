@@ -38,9 +38,7 @@
 
 import canopy.query;
 import canopy.procedural;
-
-#include "stress_support.hpp"
-#include "nested_scene.hpp"
+import canopy.testing;
 
 namespace {
 
@@ -228,7 +226,6 @@ std::vector<record> brute_force_hits(ray const& r, std::vector<triangle> const& 
               [](record const& a, record const& b) { return std::tuple(a.t, a.prim_id) < std::tuple(b.t, b.prim_id); });
     return hits;
 }
-
 
 record lane_of(packet_record const& p, int i) {
     record r;

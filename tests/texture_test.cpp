@@ -21,14 +21,11 @@
 #include <utility>
 #include <vector>
 
-#include "test_support.hpp"
-
 import canopy.texture;
 import canopy.scene;
 import canopy.image_io;
 import canopy.plugins.oiio;
-
-#include "scene_support.hpp"
+import canopy.testing;
 
 namespace {
 

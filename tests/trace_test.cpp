@@ -23,13 +23,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "test_support.hpp"
-
 import canopy.query;
-import canopy.bench_formats;
+import canopy.plugins.bench;
 import canopy.procedural;
 import canopy.image_io;
 import canopy.plugins;
+import canopy.testing;
 
 namespace {
 

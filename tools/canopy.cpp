@@ -70,7 +70,6 @@
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 import canopy;
-import canopy.bench_formats;
 import canopy.image_io;
 import canopy.plugins;
 import canopy.plugins.bench;

@@ -1,11 +1,12 @@
-// Uses the installed Canopy package: one BVH, one instance, a counting intersector; and checks
-// that it was compiled for the ISA the package records.
+// Uses the installed Canopy package: one BVH, one instance, a counting intersector, an icosphere of
+// canopy.procedural; and checks that it was compiled for the ISA the package records.
 #include <algorithm>
 #include <iterator>
 #include <cstdio>
 #include <string_view>
 #include <vector>
 import canopy;
+import canopy.procedural;
 
 // The vector features this translation unit was compiled for must be exactly those of the
 // package's ISA among them (the package's flags reach importers through canopy::canopy_isa).
@@ -74,5 +75,12 @@ int main() {
     canopy::ray const r{{0, 0, 10}, 0, {0, 0, -1}, 100};
     auto const hr = canopy::closest_hit(r, &top, &top + 1, isect);
     std::printf("hit=%d t=%g inst=%u tests=%d\n", int(hr.hit), double(hr.t), hr.inst_id, isect.tests);
-    return hr.hit && hr.t == 5.0f && hr.inst_id == 7 && isect.tests == 1 ? 0 : 1;
+    if (!(hr.hit && hr.t == 5.0f && hr.inst_id == 7 && isect.tests == 1)) return 1;
+
+    // A closed icosphere of radius 2 about z = -10 (20·4² triangles): the ray down z meets the
+    // sphere at t = 18 and the inscribed polyhedron a little further.
+    auto const ball = canopy::build_binned_sah(canopy::make_icosphere(2, {0, 0, -10}, 2.0f));
+    auto const on_ball = canopy::closest_hit(r, &ball, &ball + 1);
+    std::printf("icosphere: %zu triangles, hit t=%g\n", ball.size, double(on_ball.t));
+    return ball.size == 320 && on_ball.hit && on_ball.t >= 18.0f && on_ball.t < 18.5f ? 0 : 1;
 }

@@ -1,4 +1,4 @@
-// canopy.bench_formats — the benchmark file formats (bench/FORMATS.md of the project's shared
+// canopy.plugins.bench:formats — the benchmark file formats (bench/FORMATS.md of the project's shared
 // specification), read and written byte for byte so results compare ray by ray with any other
 // tracer fed the same files.
 //
@@ -42,7 +42,7 @@ module;
 #include <string>
 #include <string_view>
 #include <vector>
-export module canopy.bench_formats;
+export module canopy.plugins.bench:formats;
 import canopy.intersector;
 import canopy.scene;
 

@@ -1,54 +1,92 @@
 // canopy.plugins.obj — Canopy's Wavefront OBJ + MTL reader; the default loader for .obj.
 //
-// Loads: `.obj` files with their `.mtl` material libraries into one group named after the file,
-// holding one mesh node per material the faces use (meshes in order of first use; triangles of a
-// mesh in file order; a convex polygon fanned (v0 vi vi+1) in order, a non-convex one ear-clipped,
-// see canopy.scene:polygon). A file without `usemtl` is one
-// mesh whose triangle i comes from the i-th `f` line when every face is a triangle: the benchmark
-// OBJ subset (bench/FORMATS.md) reads identically. Parameters: none.
+// ### Wavefront OBJ + MTL (`obj` plugin: `.obj`, the default)
 //
-// OBJ statements read:
-//   v x y z [w | r g b [a]]   position (3 to 7 numbers; only x y z are used)
-//   vt u [v [w]]              texture coordinate; stored as (u, 1 − v): Canopy's v = 0 is the top row
-//   vn x y z                  normal (per corner, as written)
-//   f a b c ...               polygon of ≥ 3 corners: v, v/vt, v//vn or v/vt/vn; 1-based, negative
-//                             = relative to the count so far; every corner of a face has the same form
-//   usemtl NAME               material of the following faces (NAME = rest of the line, trimmed)
-//   mtllib FILE ...           material libraries, relative to the .obj (the whole rest of the line
-//                             when it names an existing file, else one file per word)
-// Everything else (o, g, s, l, p, curves, comments after #) is ignored. `o` and `g` do not split
-// meshes. A `usemtl` name that no library defines gives that mesh the default material (exporters
-// often write `usemtl` without shipping the library); faces without texture coordinates in a mesh
-// whose other faces have them get (0, 0).
+// The `obj` plugin (`plugins/obj/`, module `canopy.plugins.obj`) is Canopy's own OBJ reader and the
+// default loader for `.obj` (the `openmesh` and `bench` plugins also read `.obj`, registered as alternatives:
+// ask for them by name). It has no parameters. A file becomes one group named after it, holding **one mesh node per
+// material** the faces use: meshes in the order their material is first used, triangles of a mesh in
+// file order. A convex polygon is fanned as (v0 vi vi+1) in order; a non-convex one is ear-clipped in
+// the plane of its Newell normal, so that no triangle leaves it (`canopy::triangulate_polygon`). A file without `usemtl` is one mesh in
+// which triangle i comes from the i-th `f` line when every face is a triangle, so the benchmark OBJ
+// subset (`bench/FORMATS.md`) reads identically. Each mesh keeps only the vertices its faces use.
+// `o` and `g` do not split meshes. A face the triangulation has to fan although the fan may cover
+// more than the face (self-intersecting, all corners collinear, or non-convex with more than 256
+// corners) is counted in its mesh (`mesh_data::fanned_faces`, the first one's line in
+// `first_fanned`) and reported by `compile()` (a line of `canopy info`'s decisions).
 //
-// MTL statements read (everything else ignored; `d`/`Tr` scalars are ignored: no translucency):
-//   newmtl NAME               starts a material (NAME = rest of the line, trimmed; may be empty)
-//   Kd r g b                  colour (default (1, 1, 1) with map_Kd, Canopy's grey without)
-//   map_Kd [opts] FILE        colour texture, through registry::load_image, relative to the .mtl
-//   map_d [opts] FILE         alpha texture: its red channel becomes the alpha of the material's
-//                             texture (resampled nearest to map_Kd's size) and the material is
-//                             alpha_mode::mask with cutoff 0.5
-// A map_Kd image with any texel alpha below 1 also makes the material a mask (cutoff 0.5).
-// Texture paths: backslashes are read as folder separators. Options -blendu -blendv -bm -boost
-// -cc -mm -texres are skipped; -o -s -t -clamp -imfchan change the lookup and are errors.
+// | OBJ | read as |
+// | --- | --- |
+// | `v x y z [w]`, `v x y z r g b [a]` | a position (3 to 7 numbers; x y z are used) |
+// | `vt u [v [w]]` | a texture coordinate, stored as (u, 1 − v): Canopy's v = 0 is the image's top row |
+// | `vn x y z` | a normal, per corner as written |
+// | `f c1 c2 c3 ...` | a polygon of 3 or more corners `v`, `v/vt`, `v//vn` or `v/vt/vn`; indices 1-based, negative ones relative to the count so far; every corner of a face has the same form |
+// | `usemtl NAME` | the material of the faces that follow (NAME: the rest of the line, trimmed) |
+// | `mtllib FILE ...` | material libraries, relative to the `.obj` (the whole rest of the line if it names an existing file, else one file per word) |
+// | anything else | ignored: `o`, `g`, `s`, `l`, `p`, curves and surfaces, unknown statements; `#` starts a comment |
 //
-// Only regular files are read (canopy.scene's read_regular_file: a folder, a device or a FIFO is
-// named before it is opened); a library is read once however often `mtllib` names it, and
-// materials naming the same texture files share one image. A polygon face fanned by
-// triangulate_polygon's fallback is counted in mesh_data::fanned_faces (compile() reports it).
+// In a mesh where some faces have texture coordinates (or normals) and others not, the others get
+// (0, 0) (or their geometric normal). A `usemtl` name that no library defines gives its mesh the
+// default material: exporters often write `usemtl` without shipping the library.
 //
-// Lines, tokens, numbers and indices are read by canopy.scene:text's rules (a number is read
-// straight to the nearest float; hexadecimal, "inf" and "nan" are refused; a UTF-8 byte-order mark
-// is skipped).
+// | MTL | read as |
+// | --- | --- |
+// | `newmtl NAME` | starts a material (NAME may hold spaces, may be empty); the first definition of a name wins |
+// | `Kd r g b` (or `Kd r`) | the colour; without `Kd`: white if there is a `map_Kd`, Canopy's grey otherwise |
+// | `map_Kd [options] FILE` | the colour texture, read through the registry's image loaders (`registry::load_image`), relative to the `.mtl`; backslashes are folder separators |
+// | `map_d [options] FILE` | an alpha texture: its red channel becomes the alpha of the material's texture (resampled nearest to `map_Kd`'s size; a white texture of its own size without `map_Kd`) and the material is `alpha_mode::mask`, cutoff 0.5 |
+// | `map_Kd` whose image has a texel with alpha < 1 | also `alpha_mode::mask`, cutoff 0.5 |
+// | texture options | `-blendu -blendv -bm -boost -cc -mm -texres` skipped; `-o -s -t -clamp -imfchan` (they change the lookup) refused |
+// | anything else | ignored: `Ka Ks Ns Ni illum`, the scalars `d` and `Tr` (Canopy has no translucency), other maps |
 //
-// Errors (scene_error, "file:line: problem"; input quoted by a short prefix): bad or non-finite
-// numbers, numbers that overflow a float ("value 1e300 overflows a float"), zero or out-of-range
-// indices, faces with fewer than 3 corners, corners of mixed forms, a missing, unreadable or
-// non-regular material library (named with the .obj line that asks for it), a texture that does
-// not load (named with its .mtl line; over --max-texels, or over --max-total-texels with the
-// scene's images and the material's colour image), input that is not text ("not a text OBJ file: NUL byte at
-// offset 12", a UTF-16 byte-order mark), a file without faces (nothing to trace), vertices, texture
-// coordinates, normals or triangles over --max-triangles.
+// Only the materials the faces use are added to the scene, and only their textures are loaded;
+// materials naming the same texture files share one image. A library is read once however often
+// `mtllib` names it.
+// Texels come as the image loader returns them: 8- and 16-bit files are marked sRGB-encoded
+// (`image_data::srgb`) and `compile()` decodes their colour to linear; the alpha map's red channel is
+// used as stored.
+//
+// Only regular files are read (the `.obj`, its libraries, their textures): a folder, a device
+// (`/dev/zero`, also through a symbolic link) or a FIFO is named as such before it is opened, and a
+// file over the limit of bytes per file (`--max-file-bytes`) is refused. The `.obj` and `.mtl` must
+// be text: a NUL or other control byte (but tab, CR, LF, VT, FF) or a UTF-16/32 byte-order mark is
+// refused with its offset and line. A file with no face is refused too: there is nothing to trace
+// (an empty file, one without any OBJ statement, a point cloud, lines). Vertices, texture
+// coordinates, normals and triangles are each limited by `--max-triangles` as they grow.
+//
+// Errors (`scene_error`, `file:line: problem`; the scene is left as it was; input is quoted by its
+// first 40 bytes at most):
+//
+//     tree.obj:12: bad number '0.5x'
+//     tree.obj:3: number 'nan' is not finite
+//     tree.obj:4: value 1e300 overflows a float
+//     tree.obj:40: vertex index 4000000000 is out of range (812 vertices so far)
+//     tree.obj:41: vertex index 0 is not valid (OBJ indices start at 1)
+//     tree.obj:42: face has 2 corners; at least 3 are needed
+//     tree.obj:43: corner '2' has another form than the face's first corner '1/1'
+//     tree.obj:2: material library 'tree.mtl': file not found
+//     tree.obj:2: material library 'tree.mtl': is a FIFO, not a regular file
+//     /scenes/tree.mtl:7: texture 'bark.png': /scenes/bark.png: file not found (texture)
+//     /scenes/tree.mtl:9: texture option -s is not supported
+//     tree.obj:812: 268435457 triangles exceed the limit of 268435456 (--max-triangles)
+//     box_UTF16BE.obj: not a text OBJ file: UTF-16 byte-order mark (only ASCII or UTF-8 text is read)
+//     random.obj:3: not a text OBJ file: NUL byte at offset 130
+//     point_cloud.obj: no faces ('f' lines): nothing to trace
+//
+// The parser is a function over a buffer, `parse_obj(text, file_name, registry*, scene&, parent)`
+// (and `parse_mtl(text, file_name)`); with a null registry texture statements are checked but not
+// loaded. It is linear in the input (also for 10⁵ `usemtl` or `mtllib` lines): nothing is allocated
+// by a count read from the file. It is fuzzed (`fuzz/obj_fuzzer.cpp`, `scripts/fuzz.sh`).
+//
+// Example:
+//
+// ```cpp
+// import canopy.plugins;
+//
+// canopy::registry& r = canopy::builtin_registry();
+// canopy::scene s = canopy::load_scene("tree.obj", r);        // group "tree": a mesh per material
+// canopy::compiled_scene c = canopy::compile(s, {.plugins = &r});
+// ```
 module;
 #include <array>
 #include <cstddef>

@@ -357,10 +357,12 @@ node_id load_openmesh(scene& s, std::filesystem::path const& file, node_id paren
 
 void register_openmesh_plugin(registry& r) {
     for (char const* ext : {".ply", ".off", ".stl", ".om", ".obj"})
+        // .obj has its own reader (the obj plugin): this one is an alternative, chosen by name.
         r.add_loader(ext, "openmesh", "triangle mesh through OpenMesh (polygons triangulated)",
                      [](scene& s, std::filesystem::path const& file, node_id parent, registry const&) {
                          return load_openmesh(s, file, parent);
-                     });
+                     },
+                     std::string_view(ext) == ".obj" ? loader_rank::alternative : loader_rank::standard);
 }
 
 } // namespace canopy

@@ -1,68 +1,91 @@
 // canopy.plugins.openmesh — triangle meshes through OpenMesh 9: .ply .off .stl .om .obj
 //
-// Loads: one file into one mesh_data (name = the file's stem, source = the file's path) under a
-// group node named after the file. Parameters: none. Plugin name "openmesh"; for .obj it is not
-// the default loader (the "obj" plugin is): choose it with registry::load(s, file, parent,
-// "openmesh").
+// ### Meshes through OpenMesh (`openmesh` plugin: `.ply` `.off` `.stl` `.om`, and `.obj` by name)
 //
-// What is read:
-//   positions     every vertex of the file, in file order (no vertex is merged or split; STL is
-//                 the exception: OpenMesh's STL reader merges equal corners into one vertex)
-//   triangles     every face of the file, in file order; a face of n > 3 corners becomes n − 2
-//                 triangles (canopy.scene:polygon: the fan (c0, c_k, c_k+1) when convex,
-//                 ear-clipped when not); a face that repeats a vertex is kept as it is (its degenerate
-//                 triangles are never hit). STL: OpenMesh's STL reader skips a facet two of
-//                 whose corners are equal before any importer sees it; such facets (no area)
-//                 are counted here and reported in degenerate_faces
-//   normals       per corner, when the file has vertex normals (PLY nx/ny/nz, NOFF, OBJ vn,
-//                 OM vertex normals); OBJ's per-corner vn are kept per corner
-//   uvs           per corner, when the file has texture coordinates: per corner (OBJ vt, OM
-//                 halfedge texture coordinates) or per vertex (PLY u/v or s/t, STOFF, OM)
-// STL facet normals and colours of any format are not read.
+// The `openmesh` plugin (`plugins/openmesh/`, module `canopy.plugins.openmesh`) reads triangle and
+// polygon meshes with OpenMesh 9 (Debian's `libopenmesh-dev`). It has no parameters. Each file
+// becomes one mesh (named after the file's stem, `source` = its path) under a group named after the
+// file. For `.obj` the `obj` plugin is the default loader (this one registers `.obj` as
+// `loader_rank::alternative`) and this one is chosen by name:
+// `registry.load(s, "bunny.obj", parent, "openmesh")`.
 //
-// No face is lost on the way. OpenMesh's importer drops faces with a vertex index out of range
-// or a repeated vertex, and re-adds a face it cannot connect ("complex edge", non-manifold) on
-// copies of its vertices, both with a note on std::cerr only. This loader records each face as
-// the reader hands it over, before OpenMesh's connectivity, so non-manifold faces keep their
-// vertices; it checks the number of faces read against the number the file declares (PLY and
-// OFF headers, binary STL and OM headers, `f` lines of OBJ, `facet`s of ASCII STL) and throws
-// if they differ.
+// - **Faces**: every face of the file, in file order (a triangle's `prim_id` is its face's index in
+//   triangle-only files). A face of n > 3 corners becomes n − 2 triangles with its winding: the fan
+//   (c0, c_k, c_k+1), k = 1 … n−2, when it is convex; ear-clipped in the plane of its Newell normal
+//   when it is not, so that no triangle leaves the face (`canopy::triangulate_polygon`).
+//   `read_openmesh()` reports the faces read, how many had more than three corners (`polygons`), how
+//   many of those were non-convex (`concave_polygons`), non-manifold and degenerate faces.
+// - **Normals and texture coordinates**, per corner, when the file has them: PLY `nx ny nz` and
+//   `u v`/`s t`, NOFF/STOFF, OBJ `vn`/`vt` (kept per corner: a vertex may carry different ones in
+//   different faces), OM vertex normals and vertex or halfedge texture coordinates. STL facet normals
+//   and colours are not read.
+// - **No face lost**: OpenMesh's importer drops faces with an index out of range or a repeated
+//   vertex, and re-adds faces it cannot connect ("complex edge", non-manifold) on copies of their
+//   vertices, with a note on `std::cerr` only. The plugin records each face as the reader hands it
+//   over, before OpenMesh's connectivity, so non-manifold faces keep their own vertices and
+//   degenerate faces are kept (they are never hit); the count read is compared with the count the
+//   file declares (PLY/OFF/OM headers, binary STL count, ASCII STL `facet`s, OBJ `f` lines) and a
+//   difference is an error saying how many faces were dropped. One exception, by OpenMesh's STL
+//   reader: STL facets two of whose corners are equal are skipped before any importer sees them;
+//   they have no area, and are counted in `degenerate_faces`.
+// - **Checked before OpenMesh reads**, walked as OpenMesh's reader of the format will read it,
+//   because OpenMesh trusts what a file says: it reserves for the counts and loops over them with no
+//   end-of-file check, and it reads numbers through C++ streams, which stop at a value they cannot
+//   read (a float beyond 3.4·10³⁸, `nan`, `0x10`) while the loops go on (an ASCII PLY with a
+//   `double` of 1e300 made it grow a vector to 4 GB; an `OFF BINARY` header claiming 2·10⁹ vertices,
+//   9.8 GB). So every file must be a regular file within `--max-file-bytes`; the declared vertex and
+//   face counts must fit the file (a binary file must hold what it declares) and `--max-triangles`;
+//   every value OpenMesh reads as a float must be a decimal number that fits a float (else
+//   "overflows a float"), every integer an integer in range. Per format: ASCII OFF (header
+//   `[ST][C][N]OFF`, counts, every vertex line with its normals and STOFF texture coordinates, every
+//   face, truncation; the checked text then goes to OpenMesh's importer from here, since OpenMesh's
+//   OFF reader takes no comments and, reading from memory, keeps another file's NOFF/STOFF flags);
+//   `OFF BINARY` (counts against the bytes that follow, finite values, corner counts, indices); PLY
+//   (the header as OpenMesh parses it: `format` on line 2, element counts below 2³², the list count
+//   types it reads, `x y z`, `vertex_indices`, no other list property in the elements it reads,
+//   binary property types it converts, a binary header laid out as its seek to the data expects,
+//   e.g. no comment right before `end_header`; then every element walked: truncation, values, face
+//   indices in range, one entry a line); STL (binary size against its triangle count, finite
+//   coordinates; ASCII: the three lines after each `outer loop` are `vertex x y z`, the last line
+//   `endsolid`); OBJ (`v`, `vt`, `vn` values, `f` corners of at most three parts with indices in
+//   range, faces of fewer than three corners, no UTF-8 byte-order mark, which OpenMesh's OBJ reader
+//   would read as part of the first statement); OM (header, counts against the file's size). The
+//   checks are `plugins/openmesh/openmesh_checks.cppm`; they read text by the rules of
+//   `canopy.scene:text`, the same as the OBJ and benchmark readers (integers must fit 64 bits, a
+//   value PLY reads and drops must still be a decimal number, an integer for an integer type).
+// - A file with vertices but no faces (a PLY point cloud) is a mesh without triangles: `compile()`
+//   drops it, and reports "nothing to trace" when the scene holds nothing else.
+// - OpenMesh's messages are kept off the console while a file is read and quoted in the error when
+//   reading fails. Reads through OpenMesh are serialised (its reader registry and message streams
+//   are process-wide).
 //
-// Before OpenMesh sees a file it is checked (the :checks partition, openmesh_checks.cppm; text by
-// canopy.scene:text's rules), walked as OpenMesh's reader of its format will
-// read it, so that bad input gives a clear message with a line (text formats) or an element
-// (binary formats) instead of OpenMesh's silent misreads, endless loops or allocations sized by a
-// count in the file. OpenMesh's readers trust counts (they reserve for them, and loop over them
-// with no end-of-file check) and read numbers through C++ streams, which stop at a value they
-// cannot read (a float beyond 3.4e38, "nan", "0x10"), after which every read fails while the loops
-// go on. So, for every format: the file must be a regular file within --max-file-bytes; the
-// declared vertex and face counts must fit the file's size (binary files must hold what they
-// declare) and --max-triangles; every value OpenMesh reads as a float must be a decimal number
-// that fits a float (else "overflows a float"), every integer an integer in range; and:
-//   OFF (ASCII)   header [ST][C][N]OFF, counts, every vertex line (coordinates, normals, STOFF's
-//                 texture coordinates after COFF's colour), every face (corner count, indices in
-//                 range, truncation); the checked text is then handed to OpenMesh's importer here,
-//                 as OpenMesh's OFF reader would (that reader takes no comments, and reading from
-//                 memory it would keep the [ST][C][N] flags of the last OFF file it opened)
-//   OFF BINARY    counts against the bytes that follow, every vertex's floats finite, every
-//                 face's corner count and indices
-//   PLY           the header as OpenMesh parses it (format on line 2, element counts below 2^32,
-//                 list count types it reads, vertex x/y/z, face vertex_indices, no other list in the
-//                 elements it reads, binary types it converts, and a binary header laid out as its
-//                 seek to the data expects), then every element walked: truncation, values, face
-//                 indices in range
-//   STL           binary size against its triangle count and finite coordinates; ASCII: the three
-//                 lines OpenMesh reads after each "outer loop" are "vertex x y z"
-//   OBJ           v, vt and vn values, face corners of at most three parts with indices in range,
-//                 faces of fewer than three corners, no UTF-8 byte-order mark (OpenMesh would read it
-//                 as part of the first statement)
-//   OM            header present, counts against the file's size
+// Errors name the file, and the line (text) or element (binary) where known:
 //
-// A file with vertices but no faces (a PLY point cloud) loads as a mesh without triangles:
-// compile() drops it, and reports "nothing to trace" when nothing else is in the scene.
-// OpenMesh's messages (its omerr() stream) are captured during the read, kept off std::cerr,
-// and quoted in the error when reading fails. Reads are serialised (OpenMesh's reader registry
-// and message streams are process-wide).
+//     meshes/bad.off:4: vertex 1: coordinate 'nan' is not a finite number
+//     meshes/bad.off:6: face 0: vertex index 3 is out of range (3 vertices)
+//     meshes/big.ply:10: vertex 0: coordinate x = '1e300' overflows a float
+//     meshes/huge.off: 2000000000 vertices exceed the limit of 268435456 (--max-triangles)
+//     meshes/short.off: the header declares 1000 vertices of 12 bytes, more than the 52 bytes after it hold
+//     meshes/cut.ply: file ends in face 4 of 5
+//     meshes/cut.stl: not an STL file: as binary STL its header announces 1368 triangles (68484 bytes), the file has 68454 bytes (truncated?); as ASCII STL it does not begin with 'solid'
+//     meshes/line.obj:3: face has 2 corners (at least 3 needed)
+//     meshes/empty.ply: file is empty
+//
+// Example: the Stanford bunny of `glmark2-data` through OpenMesh, and what the reading did.
+//
+// ```cpp
+// import canopy.plugins;
+// import canopy.plugins.openmesh;
+//
+// canopy::registry& r = canopy::builtin_registry();
+// canopy::scene s;
+// r.load(s, "/usr/share/glmark2/models/bunny.obj", s.root(), "openmesh"); // 69 666 triangles
+// r.load(s, "part.ply");                                                  // default loader for .ply
+// canopy::compiled_scene c = canopy::compile(s, {.plugins = &r});
+//
+// auto const info = canopy::read_openmesh("room.off");
+// std::printf("%zu faces, %zu fanned\n", info.faces, info.polygons);
+// ```
 module;
 #include <cstddef>
 #include <filesystem>

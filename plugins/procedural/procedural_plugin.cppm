@@ -1,50 +1,54 @@
 // canopy.plugins.procedural — procedural geometry as scene-graph content.
 //
-// Generators (registry::generate(scene, name, params, parent)); each builds a group named after
-// the generator under `parent` and is deterministic in its parameters (same parameters, same
-// bits). Numbers are plain decimal text; a point is three numbers separated by spaces or commas
-// ("1 2 3", "1,2,3", "[1, 2, 3]"). A parameter that is not listed, does not parse or is out of
-// range is an error (scene_error "generator 'NAME': parameter 'KEY': problem").
+// ### Procedural scenes (`procedural` plugin: generators and the `procedural` node type)
 //
-//   sphere            a closed icosphere: 20·4^s triangles, 10·4^s + 2 shared vertices
-//     subdivisions    integer  3        [0, 8]
-//     radius          number   1        (0, 1e6]
-//     centre          point    0 0 0    each coordinate in [-1e6, 1e6]
-//   terrain           a height field over the square [-size/2, size/2]² of the x-z plane, y up:
-//                     2·resolution² triangles, (resolution + 1)² vertices; heights are value
-//                     noise (a 4×4 lattice, doubled per octave, amplitude halved per octave),
-//                     scaled so that |y| ≤ amplitude
-//     size            number   10       (0, 1e6]
-//     resolution      integer  64       [1, 2048]   cells per side
-//     amplitude       number   1        [0, 1e6]
-//     octaves         integer  4        [1, 8]
-//     seed            integer  1        [0, 4294967295]
-//   triangle_soup     `count` independent random triangles: one corner uniform in the box
-//                     [-extent, extent]³, the other two within ±size of it on each axis;
-//                     3·count vertices, triangle i is the i-th drawn
-//     count           integer  1000     [1, 10000000]
-//     size            number   0.1      (0, 1e6]
-//     extent          number   1        (0, 1e6]
-//     seed            integer  1        [0, 4294967295]
-//   billboard_forest  the demo scene of the paper's Figure 1 (`canopy render` without a scene, the
-//                     figure1_billboards example): a 40 × 40 ground grid, one icosphere mesh (3
-//                     subdivisions) placed `spheres` times and one billboard quad (two triangles,
-//                     texture coordinates (0,0) top-left … (1,1) bottom-right, an alpha-masked
-//                     material with the RGBA tree texture of make_tree_texture and the paper's
-//                     alpha cutoff 0.01) placed `billboards` times facing the camera, all through
-//                     instance nodes of free-standing prototypes (compile() builds each mesh
-//                     once), and the camera. Meshes compile in that order (geom_id 0 ground,
-//                     1 sphere, 2 billboard); placements: the ground, the spheres, the billboards.
-//     billboards      integer  160      [0, 100000]
-//     spheres         integer  7        [0, 10000]
-//     seed            integer  1        [0, 4294967295]
-//     texture_size    integer  128      [8, 4096]   the tree texture is texture_size²
+// The `procedural` plugin (`plugins/procedural/procedural_plugin.cppm`, module
+// `canopy.plugins.procedural`) builds geometry from parameters, through
+// `registry::generate(scene, name, params, parent)`. Each generator makes one group named after
+// itself under `parent`, and is deterministic in its parameters: the same parameters give the same
+// bits. Parameters are text (`canopy::parameters`); numbers are plain decimals, a point is three
+// numbers separated by spaces or commas (`"1 2 3"`, `"[1, 2, 3]"`).
 //
-// Node type:
-//   procedural        a custom node {generator: NAME, ...NAME's parameters} that expands into
-//                     what the registered generator NAME (of any plugin) builds, as a child of
-//                     the node.
-//                     Errors name the node and its file, then the generator and parameter.
+// | generator | what it builds | parameters (type, default, range) |
+// | --- | --- | --- |
+// | `sphere` | a closed icosphere: 20·4^s triangles over 10·4^s + 2 shared vertices, every edge in two faces | `subdivisions` integer 3 [0, 8]; `radius` number 1 (0, 1e6]; `centre` point `0 0 0` (each coordinate in [−1e6, 1e6]) |
+// | `terrain` | a height field over [−size/2, size/2]² in the x-z plane, y up: 2·n² triangles over (n + 1)² vertices. Heights are value noise (a 4 × 4 lattice over the square, frequency doubled and weight halved per octave), scaled so that \|y\| ≤ amplitude | `size` number 10 (0, 1e6]; `resolution` (n, cells per side) integer 64 [1, 2048]; `amplitude` number 1 [0, 1e6]; `octaves` integer 4 [1, 8]; `seed` integer 1 [0, 2³² − 1] |
+// | `triangle_soup` | `count` independent random triangles: one corner uniform in [−extent, extent]³, the other two within ±size of it per axis; 3 vertices per triangle, triangle i is the i-th drawn | `count` integer 1000 [1, 10⁷]; `size` number 0.1 (0, 1e6]; `extent` number 1 (0, 1e6]; `seed` integer 1 [0, 2³² − 1] |
+// | `billboard_forest` | the demo scene of the paper's Figure 1 (what `canopy render` draws without a scene, and the `figure1_billboards` example) as a scene graph: a 40 × 40 ground grid, one icosphere mesh (3 subdivisions) placed `spheres` times, one billboard quad (two triangles, an alpha-masked material with a procedural RGBA tree texture and the paper's alpha cutoff 0.01) placed `billboards` times facing the camera, all through instance nodes of free-standing prototypes, and the demo's camera | `billboards` integer 160 [0, 100000]; `spheres` integer 7 [0, 10000]; `seed` integer 1 [0, 2³² − 1]; `texture_size` integer 128 [8, 4096] |
+//
+// `compile()` builds each mesh of the forest once: three BLAS (ground, sphere, billboard), one top
+// level over 1 + spheres + billboards placements, and `statistics.alpha_mask_needed` is true. The
+// tree texture (`canopy::make_tree_texture(size)`, exported by the module) is a trunk and three
+// stacked tiers on a transparent background, alpha exactly 0 or 1, made in code: the plugin needs
+// no file.
+//
+// The node type `procedural` places any of these generators as a node of a scene (from code, or
+// from a scene file whose loader makes custom nodes): a custom node with the parameter `generator`
+// (the name) and that generator's parameters. `compile(s, {.plugins = &registry})` expands it into
+// the generator's group, as the node's child, under the transforms above the node.
+//
+// A parameter the generator does not have, a value that does not parse, and a value out of range
+// are errors; a failing generator leaves the scene as it was:
+//
+//     generator 'sphere': parameter 'radius': '-1' must be > 0
+//     generator 'terrain': parameter 'resolution': '5000' is not an integer in [1, 2048]
+//     generator 'sphere': parameter 'centre': '1 2' is not a point (three numbers: x y z)
+//     generator 'sphere': parameter 'radus': is not a parameter of this generator (it has: subdivisions, radius, centre)
+//     forest.json: node 'hills': generator 'terrain': parameter 'seed': '-1' is not an integer in [0, 4294967295]
+//     forest.json: node 'hills': generator 'cube' is not registered (known: billboard_forest sphere terrain triangle_soup)
+//
+// Example: a terrain with a sphere on it, one as a generated group, one as a node.
+//
+// ```cpp
+// import canopy.plugins;
+//
+// canopy::registry& r = canopy::builtin_registry();
+// canopy::scene s;
+// r.generate(s, "terrain", {{"size", "20"}, {"resolution", "128"}, {"amplitude", "1.5"}, {"seed", "7"}});
+// auto lift = s.add_transform(s.root(), canopy::affine_transform<float>::from_rows({1, 0, 0, 0, 0, 1, 0, 3, 0, 0, 1, 0}));
+// s.add_custom(lift, "procedural", {{"generator", "sphere"}, {"subdivisions", "4"}}, "ball");
+// canopy::compiled_scene c = canopy::compile(s, {.plugins = &r}); // 32768 + 5120 triangles, levels 1
+// ```
 module;
 #include <array>
 #include <bit>

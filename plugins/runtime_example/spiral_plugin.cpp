@@ -2,17 +2,84 @@
 // into any program: registry::load_plugin("canopy_plugin_spiral.so"), or list it (or its folder)
 // in CANOPY_PLUGIN_PATH for builtin_registry().
 //
-// Generator and node type "spiral_staircase": `steps` closed slabs (annular sectors) winding
-// about the y axis, step k spanning the angles [k·step_angle, (k+1)·step_angle] (degrees,
-// counter-clockwise seen from +y, starting on +x) and the heights [(k+1)·rise − thickness,
-// (k+1)·rise]. 12 triangles and 8 vertices per step, in step order.
-//     steps         integer  16     [1, 100000]
-//     step_angle    number   22.5   (0, 360]
-//     rise          number   0.2    (0, 1e6]
-//     thickness     number   0.05   (0, 1e6]
-//     inner_radius  number   0.25   (0, 1e6]
-//     outer_radius  number   1.5    (inner_radius, 1e6]
-// Bad values are errors naming the generator and the parameter.
+// ### Plugins loaded at run time (shared libraries)
+//
+// Besides the built-in plugins, a registry loads plugins compiled as shared libraries:
+//
+// ```cpp
+// canopy::registry r;                        // or canopy::builtin_registry()
+// r.load_plugin("/opt/canopy/plugins/canopy_plugin_spiral.so");
+// r.load_plugin_path("/opt/canopy/plugins:/home/me/extra.so");  // folders (every *.so, in name order) and files
+// ```
+//
+// `builtin_registry()` loads, on its first call, the list in the environment variable
+// **`CANOPY_PLUGIN_PATH`** (files and folders separated by `:`, empty entries skipped):
+//
+//     CANOPY_PLUGIN_PATH=build/release/plugins canopy info scene.json
+//
+// **The interface.** A plugin is a shared library exporting one C function, the only symbol the
+// loader looks up:
+//
+// ```cpp
+// extern "C" int canopy_plugin_register(unsigned abi_version, void* registry);
+// ```
+//
+// - `abi_version` is `canopy::plugin_abi_version` of the loading program (`canopy.scene`, currently
+//   3; raised on every incompatible change of the registry or the scene types). A plugin built
+//   against another version must return non-zero without touching the registry.
+// - `registry` points to the `canopy::registry` to register into: loaders (`add_loader`), image
+//   loaders (`add_image_loader`), generators (`add_generator`) and node types (`add_node_type`).
+//   A loader says how it ranks among the loaders of its extension (`canopy::loader_rank`:
+//   `alternative`, `standard` by default, `preferred`): the extension's default is the loader of
+//   highest rank (equal ranks: the plugin name that sorts first), never the last registered, so a
+//   plugin that means to replace a built-in loader registers as `preferred`; the others are chosen
+//   by plugin name.
+// - It returns 0 on success. A non-zero result, or an exception it lets escape, is reported as a
+//   `scene_error` naming the file, and the registry is left as it was (the plugin registers into a
+//   copy that replaces the registry only on success).
+// - A loaded library stays loaded for the life of the process: the registry holds functions that live
+//   in it. Loading the same file twice is a no-op.
+//
+// A plugin links `canopy_scene` (a static library; the project builds everything
+// position-independent) and so carries its own copy of it. Build it with hidden visibility
+// (`-fvisibility=hidden`, and `-Wl,--exclude-libs,ALL` for the symbols of the static libraries) and
+// give only the entry point default visibility: nothing of the plugin's copy can then interpose on
+// the program's. Build it with the program's compiler, standard library and flags (the scene types
+// cross the boundary by reference).
+//
+// Loading errors, each a `scene_error` naming the file:
+//
+//     plugins/notes.so: cannot load plugin: plugins/notes.so: file too short
+//     plugins/libfoo.so: not a canopy plugin: it has no canopy_plugin_register entry point
+//     /no/such/plugin.so: file not found
+//     old_plugin.so: plugin refused to register (code 1; built for another plugin_abi_version than 3?)
+//
+// **A complete plugin** (`plugins/runtime_example/`, built as `build/<preset>/plugins/canopy_plugin_spiral.so`
+// and never linked into a program): the generator and node type `spiral_staircase`, `steps` closed
+// slabs winding about the y axis, 12 triangles each. Parameters: `steps` integer 16 [1, 100000];
+// `step_angle` degrees 22.5 (0, 360]; `rise` 0.2, `thickness` 0.05, `inner_radius` 0.25 — numbers
+// in (0, 1e6]; `outer_radius` 1.5 (inner_radius, 1e6].
+//
+// ```cmake
+// add_library(canopy_plugin_spiral MODULE spiral_plugin.cpp)
+// target_link_libraries(canopy_plugin_spiral PRIVATE canopy_scene)
+// target_link_options(canopy_plugin_spiral PRIVATE "LINKER:--exclude-libs,ALL")
+// set_target_properties(canopy_plugin_spiral PROPERTIES
+//   PREFIX "" CXX_VISIBILITY_PRESET hidden VISIBILITY_INLINES_HIDDEN ON
+//   LIBRARY_OUTPUT_DIRECTORY "${CMAKE_BINARY_DIR}/plugins")
+// ```
+//
+// Using it:
+//
+// ```cpp
+// canopy::registry r;
+// r.load_plugin("build/release/plugins/canopy_plugin_spiral.so");
+// canopy::scene s;
+// r.generate(s, "spiral_staircase", {{"steps", "24"}, {"rise", "0.18"}});
+// canopy::compiled_scene c = canopy::compile(s, {.plugins = &r});   // 288 triangles, levels 0
+// ```
+//
+// Its source, `plugins/runtime_example/spiral_plugin.cpp` (this listing is made from the file):
 #include <array>
 #include <cmath>
 #include <cstdint>

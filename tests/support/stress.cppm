@@ -1,14 +1,25 @@
-// Helpers shared by the stress battery's test files (stress_test.cpp, stress_instancing_test.cpp).
-//
-// Include it after the standard headers and the `import canopy.query;` of the test file: it uses
-// <array>, <bit>, <cmath>, <cstdint>, <cstdlib>, <limits>, <random>, <sstream>, <string>,
-// <string_view>, <vector> and Catch2, which the test file includes before its imports (standard
-// headers may not follow an import).
-#pragma once
+// canopy.testing:stress — what the stress battery's test files (stress_test.cpp,
+// stress_instancing_test.cpp) share: the battery's sizes and build quality, transforms made from
+// rotations and scales, hit records compared bit for bit and described in hexadecimal, and a log of
+// failed checks.
+module;
+#include <catch2/catch.hpp>
 
-#include "random_support.hpp"
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <vector>
+export module canopy.testing:stress;
+import canopy.query;
+import :random;
 
-namespace stress_support {
+export namespace stress_support {
 
 using test_support::pack;
 using test_support::random_rays;

@@ -1,16 +1,12 @@
-// Helpers shared by the test files that need no Canopy type: a temporary folder per test, the
-// special files loaders must refuse, the message of an expected exception, and running a shell
-// command.
-//
-// Self-contained (standard headers only): include it with the test file's standard headers,
-// before its `import` lines.
-#pragma once
-
+// canopy.testing:files — what the tests need that involves no Canopy type: a temporary folder per
+// test, the special files loaders must refuse, the message of an expected exception, and running
+// a shell command.
+module;
 #include <cstdio>
 #include <exception>
 #include <filesystem>
-#include <initializer_list>
 #include <fstream>
+#include <initializer_list>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -18,8 +14,9 @@
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
+export module canopy.testing:files;
 
-namespace test_support {
+export namespace test_support {
 
 // A folder of its own, <temp>/<prefix>_<process id>_<n>: unique per test binary (the prefix
 // names it), per process and per object. Created empty; removed, with all it holds, when the

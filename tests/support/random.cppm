@@ -1,14 +1,18 @@
-// Random test geometry shared by the core tests (geometry, intersector, bvh, query, stress): a
-// seeded random source, random affine transforms, triangle soups, rays into a box, meshes moved
-// for refits, and a three-level instanced scene; also eight rays packed into one packet and the
-// checkerboard alpha mask the intersector tests use. Fixed seeds: every run tests the same cases.
-//
-// Include it after the test file's `import canopy.query;` (or `import canopy.geometry;`, for
-// what needs no BVH): it uses <array>, <cmath>, <cstdint>, <limits>, <random> and <vector>,
-// which the test file includes before its imports (standard headers may not follow an import).
-#pragma once
+// canopy.testing:random — random test geometry shared by the core tests (geometry, intersector,
+// bvh, query, stress): a seeded random source, random affine transforms, triangle soups, rays into
+// a box, meshes moved for refits; also eight rays packed into one packet and the checkerboard alpha
+// mask the intersector tests use. Fixed seeds: every run tests the same cases.
+module;
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <vector>
+export module canopy.testing:random;
+import canopy.query;
 
-namespace test_support {
+export namespace test_support {
 
 struct random_source {
     std::mt19937 engine;

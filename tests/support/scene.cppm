@@ -1,12 +1,18 @@
-// Helpers shared by the scene and plugin tests: catching the scene_error that bad input must give,
-// setting resource limits for one test, and a reference ray–triangle test.
-//
-// Include it after the test file's `import` lines (one of them must bring canopy.scene): it uses
-// <array>, <cmath>, <filesystem>, <optional>, <string>, <string_view> and Catch2, which the test
-// file includes before its imports (standard headers may not follow an import).
-#pragma once
+// canopy.testing:scene — what the scene and plugin tests share: catching the scene_error that bad
+// input must give, setting resource limits for one test, and a reference ray–triangle test.
+module;
+#include <catch2/catch.hpp>
 
-namespace test_support {
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+export module canopy.testing:scene;
+import canopy.scene;
+
+export namespace test_support {
 
 // The distance t at which ray r hits the triangle v, in [tmin, tmax], or nullopt: Möller–Trumbore
 // in double, a reference for the library's float test (use rays aimed at triangle interiors, far

@@ -1,12 +1,17 @@
-// A random three-level instanced scene shared by the intersector and query tests: two triangle
-// soups and their BVHs, eight instances of them (ids 10 + k) in a two-level BVH, and three
-// instances of that (ids 100 + j) in a three-level BVH. The same seed gives the same scene. Also
-// the brute-force hits of a ray on instances of one mesh.
-//
-// Include it after random_support.hpp, in a test file that imports canopy.query.
-#pragma once
+// canopy.testing:nested — a random three-level instanced scene shared by the intersector, query
+// and stress tests: two triangle soups and their BVHs, eight instances of them (ids 10 + k) in a
+// two-level BVH, and three instances of that (ids 100 + j) in a three-level BVH. The same seed
+// gives the same scene. Also the brute-force hits of a ray on instances of one mesh.
+module;
+#include <algorithm>
+#include <cstdint>
+#include <tuple>
+#include <vector>
+export module canopy.testing:nested;
+import canopy.query;
+import :random;
 
-namespace test_support {
+export namespace test_support {
 
 using mesh_bvh = canopy::bvh<canopy::triangle>;
 using mesh_instance = canopy::instance<mesh_bvh>;
@@ -39,7 +44,7 @@ struct nested_scene {
 
 // The hits of a plain loop over every instance and triangle, each instance's ray taken into object
 // space with the instance's own stored inverse (as traversal does), sorted by (t, inst_id,
-// prim_id). Needs <algorithm> and <tuple>.
+// prim_id).
 inline std::vector<canopy::hit_record<canopy::ray, canopy::triangle>> instanced_brute_force_hits(
     canopy::ray const& r, std::vector<mesh_instance> const& instances, std::vector<canopy::triangle> const& mesh) {
     std::vector<canopy::hit_record<canopy::ray, canopy::triangle>> hits;
