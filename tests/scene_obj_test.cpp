@@ -24,7 +24,7 @@
 import canopy.scene;
 import canopy.plugins.obj;
 import canopy.plugins.oiio;
-import canopy.image_io;
+import canopy.image;
 
 #include "scene_support.hpp"
 

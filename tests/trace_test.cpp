@@ -28,7 +28,7 @@
 import canopy.query;
 import canopy.bench_formats;
 import canopy.procedural;
-import canopy.image_io;
+import canopy.image;
 import canopy.plugins;
 
 namespace {
