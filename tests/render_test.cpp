@@ -372,6 +372,14 @@ TEST_CASE("the heat map's total equals the counting intersector's totals") {
 }
 
 TEST_CASE("counting<texture_alpha_mask> counts every test while the mask decides the hits") {
+    // Hooks for triangles and boxes make it a custom intersector (traversal calls it for every
+    // test); it has the mask's filter, and counting<default_intersector> has none.
+    using masked = canopy::counting<canopy::texture_alpha_mask>;
+    STATIC_REQUIRE(canopy::primitive_hook_for<masked, canopy::ray, canopy::triangle>);
+    STATIC_REQUIRE(canopy::box_hook_for<masked, canopy::ray, canopy::aabb, vec3<float>>);
+    STATIC_REQUIRE(canopy::filter_hook_for<masked, canopy::ray>);
+    STATIC_REQUIRE(canopy::primitive_hook_for<canopy::cost_counter, canopy::ray, canopy::triangle>);
+    STATIC_REQUIRE(!canopy::filter_hook_for<canopy::cost_counter, canopy::ray>);
     auto const scene = small_forest();
     auto const camera = forest_camera(scene);
     canopy::texture_alpha_mask mask;
