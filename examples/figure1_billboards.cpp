@@ -24,7 +24,7 @@
 #include <utility>
 #include <vector>
 import canopy;
-import canopy.image_io;
+import canopy.image;
 import canopy.scene;
 import canopy.plugins.procedural;
 
@@ -86,12 +86,7 @@ struct bvh_costs : canopy::basic_intersector<bvh_costs> {
 
 // Writes a framebuffer as an 8-bit image: linear colours are sRGB-encoded, heat colours are not.
 void save(std::filesystem::path const& file, canopy::framebuffer const& fb, bool linear) {
-    canopy::rgba_image image;
-    image.width = fb.width;
-    image.height = fb.height;
-    auto const encode = [&](float c) { return linear ? canopy::to_srgb(c) : c; };
-    for (auto const& p : fb.pixels) image.pixels.insert(image.pixels.end(), {encode(p.x), encode(p.y), encode(p.z), 1.0f});
-    canopy::write_image(file, image);
+    canopy::write_framebuffer(file, fb, {.linear = linear});
     std::printf("wrote %s\n", file.string().c_str());
 }
 
@@ -145,18 +140,16 @@ int main(int argc, char** argv) try {
         scene.closest_hit(primary_ray(x, y), counter);
         return vec4<float>(float(counter.num_boxes + counter.num_tris), 0.0f, 0.0f, 1.0f);
     });
-    // Red from the 99th percentile up, so that a few very expensive rays do not wash out the rest.
-    std::vector<float> sorted;
     double total_cost = 0.0;
+    float most = 0.0f;
     for (auto const& p : costs.pixels) {
-        sorted.push_back(p.x);
         total_cost += double(p.x);
+        most = std::max(most, p.x);
     }
-    std::sort(sorted.begin(), sorted.end());
-    float const red = std::max(1.0f, sorted[sorted.size() * 99 / 100]);
-    std::printf("BVH costs per primary ray: %.1f on average, %.0f at most\n", total_cost / double(sorted.size()),
-                double(sorted.back()));
-    for (auto& p : costs.pixels) p = vec4<float>(canopy::heat_colour(p.x, red), 1.0f);
+    std::printf("BVH costs per primary ray: %.1f on average, %.0f at most\n", total_cost / double(costs.pixels.size()),
+                double(most));
+    // Red from the 99th percentile up, so that a few very expensive rays do not wash out the rest.
+    canopy::heat_map(costs);
     save(out / "4_bvh_cost_heatmap.png", costs, false);
     return 0;
 } catch (std::exception const& e) {

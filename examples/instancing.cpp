@@ -15,7 +15,7 @@
 import canopy;
 import canopy.procedural;
 import canopy.scene;
-import canopy.image_io;
+import canopy.image;
 
 namespace {
 
@@ -100,12 +100,7 @@ int main(int argc, char** argv) try {
         return canopy::primary_kernel(scene, camera.primary_ray(float(x) + 0.5f, float(y) + 0.5f, width, height),
                                       canopy::default_intersector{});
     });
-    canopy::rgba_image image;
-    image.width = width;
-    image.height = height;
-    for (auto const& p : fb.pixels)
-        image.pixels.insert(image.pixels.end(), {canopy::to_srgb(p.x), canopy::to_srgb(p.y), canopy::to_srgb(p.z), 1.0f});
-    canopy::write_image(out, image);
+    canopy::write_framebuffer(out, fb); // sRGB-encoded
     std::printf("wrote %s (%dx%d)\n", out.string().c_str(), width, height);
     return 0;
 } catch (std::exception const& e) {

@@ -1,4 +1,4 @@
-// canopy.render: the tile scheduler (oneTBB), compiled once here.
+// canopy.render:scheduling: the tile scheduler (oneTBB), compiled once here.
 module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF

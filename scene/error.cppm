@@ -1,7 +1,7 @@
 // canopy.scene:error — the one exception type for bad scene input.
 //
 // Every loader, generator and compile step, the benchmark file readers
-// (canopy.plugins.bench:formats) and image I/O (canopy.image_io) report bad input by throwing scene_error, and nothing else does.
+// (canopy.plugins.bench:formats) and image I/O (canopy.image) report bad input by throwing scene_error, and nothing else does.
 // (Other errors are not bad input: a broken precondition of the library's API throws
 // std::invalid_argument, canopy.distributed's remote_failure carries another process's error.)
 // Its message names the file, the place in it (line, element or node, where known) and the

@@ -293,6 +293,16 @@ struct test_counter {
     }
 };
 
+// The separately written counter with the texture alpha mask's rule as its filter.
+struct masked_test_counter : test_counter {
+    canopy::texture_alpha_mask const* mask;
+
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) const {
+        return mask->keeps(hr);
+    }
+};
+
 } // namespace
 
 TEST_CASE("the heat map's total equals the counting intersector's totals") {
@@ -361,6 +371,70 @@ TEST_CASE("the heat map's total equals the counting intersector's totals") {
     CHECK(colour_mismatches == 0);
 }
 
+TEST_CASE("counting<texture_alpha_mask> counts every test while the mask decides the hits") {
+    // Hooks for triangles and boxes make it a custom intersector (traversal calls it for every
+    // test); it has the mask's filter, and counting<default_intersector> has none.
+    using masked = canopy::counting<canopy::texture_alpha_mask>;
+    STATIC_REQUIRE(canopy::primitive_hook_for<masked, canopy::ray, canopy::triangle>);
+    STATIC_REQUIRE(canopy::box_hook_for<masked, canopy::ray, canopy::aabb, vec3<float>>);
+    STATIC_REQUIRE(canopy::filter_hook_for<masked, canopy::ray>);
+    STATIC_REQUIRE(canopy::primitive_hook_for<canopy::cost_counter, canopy::ray, canopy::triangle>);
+    STATIC_REQUIRE(!canopy::filter_hook_for<canopy::cost_counter, canopy::ray>);
+    auto const scene = small_forest();
+    auto const camera = forest_camera(scene);
+    canopy::texture_alpha_mask mask;
+    mask.scene = &scene;
+
+    int count_mismatches = 0, hit_mismatches = 0, masked_pixels = 0;
+    std::uint64_t total = 0;
+    for (int y = 0; y < height; ++y)
+        for (int x = 0; x < width; ++x) {
+            canopy::ray const r = pixel_ray(camera, x, y, width, height);
+            canopy::counting<canopy::texture_alpha_mask> counter;
+            counter.inner = mask;
+            auto const counted = scene.closest_hit(r, counter);
+            std::uint64_t boxes = 0, triangles = 0;
+            masked_test_counter reference{{&boxes, &triangles}, &mask}; // the reference
+            (void)scene.closest_hit(r, reference);
+            count_mismatches += counter.num_boxes != boxes || counter.num_tris != triangles;
+            total += boxes + triangles;
+            // The hits are the mask's, and differ from the unmasked ones where the mask cuts.
+            canopy::texture_alpha_mask masked = mask;
+            auto const expected = scene.closest_hit(r, masked);
+            hit_mismatches += counted.hit != expected.hit ||
+                              (expected.hit && (counted.t != expected.t || counted.prim_id != expected.prim_id ||
+                                                counted.inst_id != expected.inst_id));
+            canopy::default_intersector none;
+            auto const plain = scene.closest_hit(r, none);
+            masked_pixels += plain.hit != expected.hit || (plain.hit && plain.t != expected.t);
+        }
+    CHECK(count_mismatches == 0);
+    CHECK(hit_mismatches == 0);
+    CHECK(total > std::uint64_t(width * height));
+    CHECK(masked_pixels > 10);
+}
+
+TEST_CASE("heat_map colours costs against their 99th percentile, at least 1") {
+    // Costs 0 … 199: the 99th percentile is the element at index 200 · 99 / 100 = 198, cost 198.
+    canopy::framebuffer fb(200, 1);
+    for (int x = 0; x < 200; ++x) fb.at(x, 0) = vec4<float>(float(x), 0.0f, 0.0f, 1.0f);
+    CHECK(canopy::heat_map(fb) == 198.0f);
+    vec3<float> const blue{0.05f, 0.05f, 0.4f}, red{0.9f, 0.1f, 0.05f};
+    auto const colour = [&](int x) { return vec3<float>(fb.at(x, 0).x, fb.at(x, 0).y, fb.at(x, 0).z); };
+    CHECK((colour(0).x == blue.x && colour(0).y == blue.y && colour(0).z == blue.z));
+    CHECK((colour(198).x == red.x && colour(198).y == red.y && colour(198).z == red.z));
+    CHECK((colour(199).x == red.x && colour(199).y == red.y && colour(199).z == red.z));
+    CHECK(fb.at(100, 0).w == 1.0f);
+    // A third of the way, 66 of 198: the second stop, green (0.1, 0.7, 0.2).
+    CHECK(colour(66).x == Approx(0.1f));
+    CHECK(colour(66).y == Approx(0.7f));
+
+    // All costs 0: red stays at 1, every pixel blue.
+    canopy::framebuffer zero(4, 4);
+    CHECK(canopy::heat_map(zero) == 1.0f);
+    CHECK(zero.at(3, 3).z == blue.z);
+}
+
 namespace {
 
 enum class kernel_kind { primary, ao, path };
@@ -382,8 +456,8 @@ canopy::framebuffer render_forest(canopy::compiled_scene const& forest, kernel_k
             canopy::ray const r = camera.primary_ray(float(x) + jx, float(y) + jy, width, height);
             switch (kernel) {
             case kernel_kind::primary: sum = sum + canopy::primary_kernel(forest, r, mask); break;
-            case kernel_kind::ao: sum = sum + canopy::ao_kernel(forest, r, mask, rng, 8, 2.0f); break;
-            case kernel_kind::path: sum = sum + canopy::path_kernel(forest, r, mask, rng, 3); break;
+            case kernel_kind::ao: sum = sum + canopy::ao_kernel(forest, r, mask, rng, {.samples = 8, .radius = 2.0f}); break;
+            case kernel_kind::path: sum = sum + canopy::path_kernel(forest, r, mask, rng, {.bounces = 3}); break;
             }
         }
         return sum * (1.0f / float(spp));

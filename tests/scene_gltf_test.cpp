@@ -1,6 +1,6 @@
 // Tests of the glTF plugin (canopy.plugins.gltf). Every file is written here: JSON text plus a
 // binary buffer (an external .bin, a base64 data: URI, or a hand-assembled .glb), and a PNG
-// written through canopy.image_io. Expected values are worked out by hand from the numbers put in
+// written through canopy.image. Expected values are worked out by hand from the numbers put in
 // the file: world positions from the node transforms, triangles from the glTF rules for strips
 // and fans, texels from the sRGB formula, and hits from rays aimed at chosen texture quadrants.
 #include <catch2/catch.hpp>
@@ -20,7 +20,7 @@
 #include <vector>
 
 import canopy.scene;
-import canopy.image_io;
+import canopy.image;
 import canopy.plugins.oiio;
 import canopy.plugins.gltf;
 import canopy.plugins;

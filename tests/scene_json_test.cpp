@@ -20,7 +20,7 @@ import canopy.scene;
 import canopy.plugins.json;
 import canopy.plugins.obj;
 import canopy.plugins.oiio;
-import canopy.image_io;
+import canopy.image;
 import canopy.testing;
 
 namespace {

@@ -22,7 +22,7 @@
 import canopy.scene;
 import canopy.plugins.obj;
 import canopy.plugins.oiio;
-import canopy.image_io;
+import canopy.image;
 import canopy.testing;
 
 namespace {

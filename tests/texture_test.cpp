@@ -1,7 +1,7 @@
 // Tests of canopy.texture. References are hand-computed texels and blends, a double-precision
 // bilinear filter whose address modes are written as loops (repeated shifts and reflections),
 // and, for SIMD coordinates, the scalar tex2D run lane by lane. Then the reading of texture
-// files (canopy.image_io, canopy.plugins.oiio): hand-written image files with known texels, and
+// files (canopy.image, canopy.plugins.oiio): hand-written image files with known texels, and
 // hostile ones (a header claiming 16384 × 16384, a /dev/zero symlink) refused by name before
 // anything is decoded.
 #include <catch2/catch.hpp>
@@ -23,7 +23,7 @@
 
 import canopy.texture;
 import canopy.scene;
-import canopy.image_io;
+import canopy.image;
 import canopy.plugins.oiio;
 import canopy.testing;
 
@@ -500,7 +500,7 @@ TEST_CASE("an image whose header claims more than --max-texels texels is refused
     std::string const expected =
         "big.png: image is 16384 × 16384 (268435456 texels), over the limit of 67108864 texels (--max-texels)";
     CHECK_THAT(problem_of([&] { (void)canopy::read_image(big); }), Catch::Contains(expected));
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(big); }), Catch::Contains(expected));
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(big); }), Catch::Contains(expected));
     canopy::registry r;
     canopy::register_oiio_plugin(r);
     CHECK_THAT(problem_of([&] { (void)r.load_image(big); }), Catch::Contains(expected));
@@ -513,15 +513,15 @@ TEST_CASE("an image whose header claims more than --max-texels texels is refused
     two.pixels = {1, 0, 0, 1, 0, 1, 0, 1};
     canopy::write_image(tmp.path / "two.png", two);
     canopy::default_limits().max_texels = 2;
-    auto const read = canopy::read_texture_image(tmp.path / "two.png");
+    auto const read = canopy::read_texture(tmp.path / "two.png");
     REQUIRE(read.texels.size() == 2);
     CHECK(read.texels[1].y == 1.0f);
     CHECK(read.texels[1].w == 1.0f);
     canopy::default_limits().max_texels = 1;
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "two.png"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "two.png"); }),
                Catch::Contains("two.png: image is 2 × 1 (2 texels), over the limit of 1 texels (--max-texels)"));
     canopy::default_limits().max_file_bytes = 20;
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "two.png"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "two.png"); }),
                Catch::Contains("two.png: is ") && Catch::Contains("bytes, over the limit of 20 bytes per file (--max-file-bytes)"));
 }
 
@@ -537,7 +537,7 @@ TEST_CASE("the images of a scene share a texel budget (--max-total-texels), chec
     CHECK(problem_of([&] { (void)r.load_image(claim, 100); }) ==
           claim.string() + ": image is 100 × 100 (10000 texels): with the 100 texels of the images loaded before it, "
                            "10100 texels in all exceed the limit of 10050 (--max-total-texels)");
-    CHECK(problem_of([&] { (void)canopy::read_texture_image(claim, 51); }) ==
+    CHECK(problem_of([&] { (void)canopy::read_texture(claim, 51); }) ==
           claim.string() + ": image is 100 × 100 (10000 texels): with the 51 texels of the images loaded before it, "
                            "10051 texels in all exceed the limit of 10050 (--max-total-texels)");
     // Within the budget, the header passes and decoding fails on the missing data.
@@ -557,7 +557,7 @@ TEST_CASE("the images of a scene share a texel budget (--max-total-texels), chec
     CHECK(problem_of([&] { (void)r.load_image(tmp.path / "two.png", 10049); }) ==
           (tmp.path / "two.png").string() + ": image is 2 × 1 (2 texels): with the 10049 texels of the images loaded "
                                             "before it, 10051 texels in all exceed the limit of 10050 (--max-total-texels)");
-    // canopy.image_io's own limits, without the registry.
+    // canopy.image's own limits, without the registry.
     canopy::image_read_limits const limits{1 << 20, 1 << 20, 10, 9};
     CHECK_THAT(problem_of([&] { (void)canopy::read_image(tmp.path / "two.png", limits); }),
                Catch::Contains("11 texels in all exceed the limit of 10 (--max-total-texels)"));
@@ -589,10 +589,10 @@ TEST_CASE("GIF, WebP and BMP headers are checked before OpenImageIO opens them (
         return g;
     };
     tmp.write("big.gif", gif(65535, 65535));
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.gif"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "big.gif"); }),
                Catch::Contains("big.gif: image is 65535 × 65535 (4294836225 texels), over the limit of 67108864 texels (--max-texels)"));
     tmp.write("small.gif", gif(1, 1));
-    auto const small = canopy::read_texture_image(tmp.path / "small.gif");
+    auto const small = canopy::read_texture(tmp.path / "small.gif");
     CHECK(small.width == 1);
     CHECK(small.height == 1);
     // BMP, run-length encoded, 20000 × 20000 (OpenImageIO decodes it whole as it opens it).
@@ -602,7 +602,7 @@ TEST_CASE("GIF, WebP and BMP headers are checked before OpenImageIO opens them (
     u16(bmp, 1), u16(bmp, 8), u32(bmp, 1), u32(bmp, 4), u32(bmp, 2835), u32(bmp, 2835), u32(bmp, 2), u32(bmp, 0);
     bmp += std::string("\x00\x00\x00\x00\xff\xff\xff\x00\x00\x01\x00\x00", 12);
     tmp.write("big.bmp", bmp);
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.bmp"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "big.bmp"); }),
                Catch::Contains("big.bmp: image is 20000 × 20000 (400000000 texels), over the limit"));
     // WebP, lossless, 16383 × 16383.
     std::string webp = "RIFF";
@@ -613,7 +613,7 @@ TEST_CASE("GIF, WebP and BMP headers are checked before OpenImageIO opens them (
     u32(webp, 16382u | 16382u << 14 | 1u << 28);
     webp += std::string(64, '\0');
     tmp.write("big.webp", webp);
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "big.webp"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "big.webp"); }),
                Catch::Contains("big.webp: image is 16383 × 16383 (268402689 texels), over the limit"));
 }
 
@@ -623,24 +623,24 @@ TEST_CASE("a texture that is a device, a folder or not what its extension says i
     fs::create_directory(tmp.path / "folder.png");
     CHECK_THAT(problem_of([&] { (void)canopy::read_image(tmp.path / "zero.png"); }),
                Catch::Contains("zero.png: is a character device, not a regular file"));
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "zero.png"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "zero.png"); }),
                Catch::Contains("zero.png: is a character device, not a regular file"));
     canopy::registry r;
     canopy::register_oiio_plugin(r);
     CHECK_THAT(problem_of([&] { (void)r.load_image(tmp.path / "zero.png"); }),
                Catch::Contains("zero.png: is a character device, not a regular file (texture)"));
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "folder.png"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "folder.png"); }),
                Catch::Contains("folder.png: is a folder, not a regular file"));
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "absent.png"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "absent.png"); }),
                Catch::Contains("absent.png: file not found"));
 
     // A PPM named .png is read by the PNG reader only (no guessing among every format), and a
     // PNG that claims no pixels is refused.
     tmp.write("ppm.png", std::string("P6\n1 1\n255\n\x10\x20\x30", 14));
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "ppm.png"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "ppm.png"); }),
                Catch::Contains("ppm.png: cannot read image"));
     tmp.write("empty.png", png_claiming(0, 5));
-    CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "empty.png"); }),
+    CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "empty.png"); }),
                Catch::Contains("empty.png: cannot read image"));
 }
 
@@ -654,14 +654,14 @@ TEST_CASE("a PNG cut anywhere after its pixel data, before the end of its IEND c
     std::ifstream in(tmp.path / "two.png", std::ios::binary);
     std::string const whole((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     REQUIRE(whole.ends_with(std::string("IEND\xAE\x42\x60\x82", 8)));
-    CHECK(canopy::read_texture_image(tmp.path / "two.png").texels.size() == 2);
+    CHECK(canopy::read_texture(tmp.path / "two.png").texels.size() == 2);
     // Bytes after IEND are tolerated; a file cut in its last 12 bytes (the IEND chunk) is not.
     tmp.write("trailing.png", whole + "junk");
-    CHECK(canopy::read_texture_image(tmp.path / "trailing.png").texels.size() == 2);
+    CHECK(canopy::read_texture(tmp.path / "trailing.png").texels.size() == 2);
     for (std::size_t cut : {1u, 4u, 8u, 12u}) {
         INFO("cut " << cut);
         tmp.write("cut.png", whole.substr(0, whole.size() - cut));
-        CHECK_THAT(problem_of([&] { (void)canopy::read_texture_image(tmp.path / "cut.png"); }),
+        CHECK_THAT(problem_of([&] { (void)canopy::read_texture(tmp.path / "cut.png"); }),
                    Catch::Contains("cut.png: PNG file without its IEND chunk at the end (truncated?)"));
     }
 }
@@ -669,7 +669,7 @@ TEST_CASE("a PNG cut anywhere after its pixel data, before the end of its IEND c
 TEST_CASE("texture files decode to RGBA: grey to RGB, missing alpha 1, 8-bit data marked sRGB") {
     temp_folder const tmp("canopy_texture_test");
     tmp.write("grey.pgm", std::string("P5\n2 1\n255\n\x00\xff", 13));
-    auto const grey = canopy::read_texture_image(tmp.path / "grey.pgm");
+    auto const grey = canopy::read_texture(tmp.path / "grey.pgm");
     REQUIRE(grey.width == 2);
     REQUIRE(grey.height == 1);
     CHECK(grey.srgb);
@@ -687,4 +687,42 @@ TEST_CASE("texture files decode to RGBA: grey to RGB, missing alpha 1, 8-bit dat
     CHECK(rgb.pixels[3] == 1.0f);
     CHECK(rgb.at(0, 1)[0] == 1.0f);
     CHECK(rgb.at(0, 1)[3] == 1.0f);
+}
+
+TEST_CASE("write_framebuffer writes display values: exposure, tone curve and sRGB, or colours as they are") {
+    temp_folder const tmp("canopy_texture_test");
+    canopy::framebuffer fb(4, 1);
+    float const nan = std::numeric_limits<float>::quiet_NaN();
+    fb.at(0, 0) = {0.5f, 0.0f, 1.0f, 0.3f};
+    fb.at(1, 0) = {nan, 0.5f, 0.5f, 1.0f};
+    fb.at(2, 0) = {2.0f, 4.0f, 0.4f, 1.0f};
+    fb.at(3, 0) = {1.0f, 0.25f, 8.0f, 1.0f};
+    // A linear value over 0.0031308, sRGB-encoded (IEC 61966-2-1) and stored in 8 bits.
+    auto const srgb8 = [](double linear) { return std::round((1.055 * std::pow(linear, 1.0 / 2.4) - 0.055) * 255.0) / 255.0; };
+    CHECK(srgb8(0.5) == Approx(188.0 / 255.0));
+
+    // Exposure 2^-2, no tone curve (clipped at 1): (0.5, 0, 1) → (0.125, 0, 0.25), (2, 4, 0.4) → (0.5, 1, 0.1).
+    CHECK(canopy::write_framebuffer(tmp.path / "shaded.png", fb, {.exposure_scale = 0.25f}) == 1);
+    auto const shaded = canopy::read_image(tmp.path / "shaded.png");
+    REQUIRE(shaded.width == 4);
+    CHECK(shaded.at(0, 0)[0] == Approx(srgb8(0.125)));
+    CHECK(shaded.at(0, 0)[1] == 0.0f);
+    CHECK(shaded.at(0, 0)[2] == Approx(srgb8(0.25)));
+    CHECK(shaded.at(0, 0)[3] == 1.0f); // alpha is always 1
+    CHECK(shaded.at(1, 0)[0] == 0.0f); // a NaN pixel is black
+    CHECK(shaded.at(1, 0)[1] == 0.0f);
+    CHECK(shaded.at(2, 0)[0] == Approx(srgb8(0.5)));
+    CHECK(shaded.at(2, 0)[1] == 1.0f);
+    CHECK(shaded.at(2, 0)[2] == Approx(srgb8(0.1)));
+    CHECK(shaded.at(3, 0)[2] == 1.0f);
+
+    // Reinhard, no exposure: 1 → 1 / (1 + 1) = 0.5.
+    CHECK(canopy::write_framebuffer(tmp.path / "reinhard.png", fb, {.tone = canopy::tone_curve::reinhard}) == 1);
+    CHECK(canopy::read_image(tmp.path / "reinhard.png").at(3, 0)[0] == Approx(srgb8(0.5)));
+
+    // Colours as they are (heat maps): no exposure, no sRGB; 0.4 → 102 / 255.
+    CHECK(canopy::write_framebuffer(tmp.path / "colours.png", fb, {.linear = false, .exposure_scale = 0.25f}) == 1);
+    auto const colours = canopy::read_image(tmp.path / "colours.png");
+    CHECK(colours.at(2, 0)[2] == Approx(102.0 / 255.0));
+    CHECK(colours.at(0, 0)[2] == 1.0f);
 }

@@ -26,7 +26,7 @@
 import canopy.query;
 import canopy.plugins.bench;
 import canopy.procedural;
-import canopy.image_io;
+import canopy.image;
 import canopy.plugins;
 import canopy.testing;
 

@@ -1,4 +1,4 @@
-// Implementation of canopy.image_io on OpenImageIO 2.4.
+// Implementation of canopy.image on OpenImageIO 2.4: the one reading path (read_into) and the writer.
 module;
 #include <algorithm>
 #include <cctype>
@@ -18,7 +18,8 @@ module;
 #include <vector>
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
-module canopy.image_io;
+module canopy.image;
+import canopy.render;
 import canopy.scene;
 
 namespace canopy {
@@ -92,20 +93,23 @@ bool png_without_end(std::filesystem::path const& path, std::uint64_t size) {
     return std::string_view(last.data(), std::size_t(in.gcount())).find(std::string_view(end, 8)) == std::string_view::npos;
 }
 
+// An image's size and encoding, known from its header before its pixels are decoded.
+struct image_header {
+    int width = 0;
+    int height = 0;
+    bool srgb = false; // as rgba_image::srgb
+};
+
 void check_texels(std::filesystem::path const& path, std::uint64_t width, std::uint64_t height,
                   image_read_limits const& limits) {
     std::string const problem = texel_problem(width, height, limits.texels_held, limits.max_texels, limits.max_total_texels);
     if (!problem.empty()) fail(path, problem);
 }
 
-} // namespace
-
-image_read_limits default_image_read_limits() {
-    return {default_limits().max_file_bytes, default_limits().max_texels, default_limits().max_total_texels, 0};
-}
-
-void read_image_into(std::filesystem::path const& path, image_read_limits const& limits,
-                     std::function<float*(image_header const&)> const& allocate) {
+// The one reading path: reads the header, checks it, then calls allocate(header) once for the
+// storage of the pixels (4 · width · height floats, RGBA, row 0 first) and decodes into it.
+void read_into(std::filesystem::path const& path, image_read_limits const& limits,
+               std::function<float*(image_header const&)> const& allocate) {
     std::uint64_t size = 0;
     try {
         size = require_regular_file(path, limits.max_file_bytes);
@@ -166,9 +170,29 @@ void read_image_into(std::filesystem::path const& path, image_read_limits const&
     in->close();
 }
 
+} // namespace
+
+image_read_limits default_image_read_limits(std::uint64_t texels_held) {
+    return {default_limits().max_file_bytes, default_limits().max_texels, default_limits().max_total_texels, texels_held};
+}
+
+image_data read_texture(std::filesystem::path const& path, std::uint64_t texels_held) {
+    static_assert(sizeof(vec4<float>) == 4 * sizeof(float));
+    image_data out;
+    out.source = path.string();
+    read_into(path, default_image_read_limits(texels_held), [&](image_header const& h) {
+        out.width = h.width;
+        out.height = h.height;
+        out.srgb = h.srgb;
+        out.texels.resize(std::size_t(h.width) * std::size_t(h.height));
+        return &out.texels.data()->x;
+    });
+    return out;
+}
+
 rgba_image read_image(std::filesystem::path const& path, image_read_limits const& limits) {
     rgba_image image;
-    read_image_into(path, limits, [&](image_header const& h) {
+    read_into(path, limits, [&](image_header const& h) {
         image.width = h.width;
         image.height = h.height;
         image.srgb = h.srgb;
@@ -207,6 +231,16 @@ void write_image(std::filesystem::path const& path, rgba_image const& image) {
     file.write(reinterpret_cast<char const*>(encoded.data()), std::streamsize(encoded.size()));
     file.close();
     if (!file) fail(path, "cannot write: " + os_reason());
+}
+
+std::size_t write_framebuffer(std::filesystem::path const& path, framebuffer const& fb, display_options const& display) {
+    rgba_image image;
+    image.width = fb.width;
+    image.height = fb.height;
+    std::size_t nan_pixels = 0;
+    image.pixels = display_values(fb, display, nan_pixels);
+    write_image(path, image);
+    return nan_pixels;
 }
 
 } // namespace canopy
