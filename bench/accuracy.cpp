@@ -82,6 +82,7 @@
 #include <tuple>
 #include <vector>
 #include <embree3/rtcore.h>
+#include "embree_support.hpp"
 #include <fmt/core.h>
 #include <gmpxx.h>
 #include <tbb/blocked_range.h>
@@ -461,20 +462,7 @@ struct embree_scene {
     embree_scene(RTCDevice device, std::vector<triangle> const& mesh, bool robust) {
         handle = rtcNewScene(device);
         if (robust) rtcSetSceneFlags(handle, RTC_SCENE_FLAG_ROBUST);
-        RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-        auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                              3 * sizeof(float), 3 * mesh.size()));
-        auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                                   3 * sizeof(unsigned), mesh.size()));
-        for (std::size_t i = 0; i < mesh.size(); ++i) {
-            vec3<float> const p[3] = {mesh[i].v0, mesh[i].v1, mesh[i].v2};
-            for (std::size_t k = 0; k < 3; ++k) {
-                v[9 * i + 3 * k + 0] = p[k].x;
-                v[9 * i + 3 * k + 1] = p[k].y;
-                v[9 * i + 3 * k + 2] = p[k].z;
-                idx[3 * i + k] = unsigned(3 * i + k);
-            }
-        }
+        RTCGeometry geom = canopy_bench::embree_triangles(device, mesh);
         rtcCommitGeometry(geom);
         rtcAttachGeometry(handle, geom);
         rtcReleaseGeometry(geom);
@@ -488,12 +476,7 @@ struct embree_scene {
 trace_result embree_trace(RTCScene scene, canopy::ray const& r) {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
-    RTCRayHit rh{};
-    rh.ray.org_x = r.origin.x, rh.ray.org_y = r.origin.y, rh.ray.org_z = r.origin.z;
-    rh.ray.dir_x = r.direction.x, rh.ray.dir_y = r.direction.y, rh.ray.dir_z = r.direction.z;
-    rh.ray.tnear = r.tmin, rh.ray.tfar = r.tmax, rh.ray.mask = ~0u;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    RTCRayHit rh = canopy_bench::embree_ray_hit(r);
     rtcIntersect1(scene, &context, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
     return {true, double(rh.ray.tfar), rh.hit.primID};

@@ -60,6 +60,7 @@
 #include <utility>
 #include <vector>
 #include <embree3/rtcore.h>
+#include "embree_support.hpp"
 #include <fmt/core.h>
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
@@ -131,22 +132,10 @@ struct embree_scene {
     RTCScene root() const { return instanced ? top : mesh; }
 };
 
-// The mesh as an unindexed triangle geometry: triangle i is primitive i, as in Canopy.
+// The mesh as an unindexed triangle geometry (canopy_bench::embree_triangles), committed, with the
+// alpha rule as its filter when asked.
 RTCGeometry embree_triangles(RTCDevice device, std::vector<canopy::triangle> const& mesh, bool alpha) {
-    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                          3 * sizeof(float), 3 * mesh.size()));
-    auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                               3 * sizeof(unsigned), mesh.size()));
-    for (std::size_t i = 0; i < mesh.size(); ++i) {
-        canopy::vec3<float> const p[3] = {mesh[i].v0, mesh[i].v1, mesh[i].v2};
-        for (std::size_t k = 0; k < 3; ++k) {
-            v[9 * i + 3 * k + 0] = p[k].x;
-            v[9 * i + 3 * k + 1] = p[k].y;
-            v[9 * i + 3 * k + 2] = p[k].z;
-            idx[3 * i + k] = unsigned(3 * i + k);
-        }
-    }
+    RTCGeometry geom = canopy_bench::embree_triangles(device, mesh);
     if (alpha) {
         rtcSetGeometryIntersectFilterFunction(geom, alpha_filter);
         rtcSetGeometryOccludedFilterFunction(geom, alpha_filter);
@@ -198,20 +187,12 @@ canopy::bench_hit embree_trace(embree_scene const& s, canopy::ray const& r, bool
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
     if (closest) {
-        RTCRayHit rh{};
-        rh.ray.org_x = r.origin.x, rh.ray.org_y = r.origin.y, rh.ray.org_z = r.origin.z;
-        rh.ray.dir_x = r.direction.x, rh.ray.dir_y = r.direction.y, rh.ray.dir_z = r.direction.z;
-        rh.ray.tnear = r.tmin, rh.ray.tfar = r.tmax, rh.ray.mask = ~0u;
-        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        RTCRayHit rh = canopy_bench::embree_ray_hit(r);
         rtcIntersect1(s.root(), &context, &rh);
         if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
         return {rh.ray.tfar, rh.hit.primID, s.instanced ? rh.hit.instID[0] : canopy::invalid_id, rh.hit.u, rh.hit.v};
     }
-    RTCRay ray{};
-    ray.org_x = r.origin.x, ray.org_y = r.origin.y, ray.org_z = r.origin.z;
-    ray.dir_x = r.direction.x, ray.dir_y = r.direction.y, ray.dir_z = r.direction.z;
-    ray.tnear = r.tmin, ray.tfar = r.tmax, ray.mask = ~0u;
+    RTCRay ray = canopy_bench::embree_ray(r);
     rtcOccluded1(s.root(), &context, &ray);
     if (ray.tfar != -std::numeric_limits<float>::infinity()) return {};
     return {0.0f, canopy::occluded_unreported, canopy::invalid_id, 0.0f, 0.0f};

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 #include <embree3/rtcore.h>
+#include "embree_support.hpp"
 import canopy;
 import canopy.procedural;
 
@@ -22,11 +23,7 @@ void accept_all(RTCFilterFunctionNArguments const*) {}
     for (auto const& r : rays) {
         RTCIntersectContext context;
         rtcInitIntersectContext(&context);
-        RTCRayHit rh{};
-        rh.ray.org_x = r.origin.x, rh.ray.org_y = r.origin.y, rh.ray.org_z = r.origin.z;
-        rh.ray.dir_x = r.direction.x, rh.ray.dir_y = r.direction.y, rh.ray.dir_z = r.direction.z;
-        rh.ray.tnear = r.tmin, rh.ray.tfar = r.tmax, rh.ray.mask = ~0u;
-        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        RTCRayHit rh = canopy_bench::embree_ray_hit(r);
         rtcIntersect1(scene, &context, &rh);
         hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID ? 1u : 0u;
     }
@@ -56,18 +53,7 @@ int main(int argc, char** argv) {
 
     RTCDevice device = rtcNewDevice("threads=1");
     RTCScene scene = rtcNewScene(device);
-    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                          3 * sizeof(float), 3 * tris.size()));
-    auto* idx = static_cast<unsigned*>(
-        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), tris.size()));
-    for (std::size_t i = 0; i < tris.size(); ++i) {
-        canopy::vec3<float> const p[3] = {tris[i].v0, tris[i].v1, tris[i].v2};
-        for (std::size_t k = 0; k < 3; ++k) {
-            v[9 * i + 3 * k + 0] = p[k].x, v[9 * i + 3 * k + 1] = p[k].y, v[9 * i + 3 * k + 2] = p[k].z;
-            idx[3 * i + k] = unsigned(3 * i + k);
-        }
-    }
+    RTCGeometry geom = canopy_bench::embree_triangles(device, tris);
     if (mode == "noop_filter") rtcSetGeometryIntersectFilterFunction(geom, accept_all);
     rtcCommitGeometry(geom);
     rtcAttachGeometry(scene, geom);
