@@ -381,7 +381,7 @@ TEST_CASE("rays from inside a closed thin cylinder and a closed bicone of sliver
                           },
                           2 * half});
     }
-    int const count = sized(250'000, 2'000'000);
+    int const count = sized_rays(250'000, 2'000'000);
     for (shape const& sh : shapes) {
         INFO(sh.name << ", " << sh.tris.size() << " triangles, " << count << " rays from inside");
         REQUIRE(features_of(sh.tris).open_edges == 0);
