@@ -517,6 +517,10 @@ TEST_CASE("look_at refuses values that give no camera, and says why") {
         {eye, target, {0, 0, 0}, 45, 1, "up is zero: no orientation"},
         // A camera under a scale of 1e-30: the direction's squared length underflows.
         {{0, 0, 5e-30f}, target, up, 45, 1, "eye (0, 0, 5e-30) and target (0, 0, 0) are too close to give a view direction in float"},
+        {{0, 0, 1e38f}, target, up, 45, 1,
+         "eye (0, 0, 1e+38) and target (0, 0, 0) are 1e+38 apart, too far for a float view direction (its squared length overflows)"},
+        {{0, 0, 2e19f}, target, up, 45, 1,
+         "eye (0, 0, 2e+19) and target (0, 0, 0) are 2e+19 apart, too far for a float view direction (its squared length overflows)"},
         {eye, target, {0, 1e-30f, 0}, 45, 1, "up (0, 1e-30, 0) has no direction in float (its length under- or overflows)"},
         {{-3e38f, 0, 0}, {3e38f, 0, 0}, up, 45, 1, "eye (-3e+38, 0, 0) and target (3e+38, 0, 0) are too far apart for float"},
     };

@@ -76,9 +76,17 @@ private:
         if (!all_finite(view)) return "eye " + text(eye) + " and target " + text(target) + " are too far apart for float";
         c.eye = eye;
         c.forward = normalize(view);
-        if (!all_finite(c.forward) || !unit(c.forward))
+        if (!all_finite(c.forward) || !unit(c.forward)) {
+            // normalize squares the components in float: a distance over √FLT_MAX overflows there,
+            // one so small that its square underflows leaves no direction.
+            double const distance = std::sqrt(double(view.x) * double(view.x) + double(view.y) * double(view.y) +
+                                              double(view.z) * double(view.z));
+            if (distance > 1.0)
+                return "eye " + text(eye) + " and target " + text(target) + " are " + text(float(distance)) +
+                       " apart, too far for a float view direction (its squared length overflows)";
             return "eye " + text(eye) + " and target " + text(target) +
                    " are too close to give a view direction in float (a collapsed camera)";
+        }
         if (up_hint.x == 0.0f && up_hint.y == 0.0f && up_hint.z == 0.0f) return "up is zero: no orientation";
         vec3<float> const up_direction = normalize(up_hint);
         if (!all_finite(up_direction) || !unit(up_direction))
