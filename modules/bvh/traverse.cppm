@@ -156,12 +156,18 @@ template <bool Fused>
         tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, a), tfar);
     }
     tfar = simd::min(tfar * float8(far_scale), ray.box_tmax8);
-    // Unused slots hold empty boxes, but a NaN or infinite ray can make any box look hit: they
-    // are masked out by their child index.
-    auto const used = simd::int8::load(reinterpret_cast<std::int32_t const*>(node.child.data())) !=
-                      simd::int8(std::int32_t(-1));
     child_hits<float> h;
-    h.mask = simd::movemask((tnear <= tfar) & used);
+    if constexpr (Fused) {
+        // Unused slots hold empty boxes, which the fused form misses by construction (finite,
+        // non-zero inverse direction: canopy.geometry:box, slab_offsets).
+        h.mask = simd::movemask(tnear <= tfar);
+    } else {
+        // A NaN or infinite ray can make an empty box look hit: unused slots are masked out by
+        // their child index.
+        auto const used = simd::int8::load(reinterpret_cast<std::int32_t const*>(node.child.data())) !=
+                          simd::int8(std::int32_t(-1));
+        h.mask = simd::movemask((tnear <= tfar) & used);
+    }
     tnear.store(h.tnear.data());
     return h;
 }
@@ -271,18 +277,24 @@ struct traversal_entry {
 };
 
 // The pending children of one traversal. Depth never exceeds bvh_max_depth, and each level
-// pushes at most bvh_width - 1 entries.
+// pushes at most bvh_width - 1 entries. The top is a pointer, not an int count: the entries'
+// 32-bit fields may alias an int (signed and unsigned types alias), so a count would be reloaded
+// from memory after every entry stored; a pointer stays in a register.
 template <typename S, typename L = no_lanes>
 struct traversal_stack {
-    void push(traversal_entry<S, L> const& e) { entries[std::size_t(size++)] = e; }
+    traversal_stack() = default;
+    traversal_stack(traversal_stack const&) = delete;
+    traversal_stack& operator=(traversal_stack const&) = delete;
+
+    [[gnu::always_inline]] inline void push(traversal_entry<S, L> const& e) { *top++ = e; }
 
     // Pops into `next` the most recent entry that the ray still enters before box_tmax; false
     // when none is left.
-    bool pop_nearer_than(S box_tmax, traversal_entry<S, L>& next) {
-        while (size > 0) {
-            auto const& e = entries[std::size_t(--size)];
-            if (e.tnear <= box_tmax) {
-                next = e;
+    [[gnu::always_inline]] inline bool pop_nearer_than(S box_tmax, traversal_entry<S, L>& next) {
+        while (top != entries.data()) {
+            --top;
+            if (top->tnear <= box_tmax) {
+                next = *top;
                 return true;
             }
         }
@@ -290,7 +302,7 @@ struct traversal_stack {
     }
 
     std::array<traversal_entry<S, L>, (bvh_width - 1) * bvh_max_depth + 1> entries;
-    int size = 0;
+    traversal_entry<S, L>* top = entries.data(); // one past the most recent entry
 };
 
 // The hit children of `node` in visiting order: returns the first to visit and pushes the
@@ -332,16 +344,15 @@ template <bool near_first, typename Prim, typename S, typename L>
             stack.push(two_first ? one : two);
             return two_first ? two : one;
         }
-        int const base = stack.size;
-        auto* const e = stack.entries.data();
-        e[stack.size++] = one;
+        auto* const base = stack.top;
+        *stack.top++ = one;
         for (; rest != 0; rest &= rest - 1) {
             auto const next = entry(std::uint32_t(__builtin_ctz(rest)));
-            int j = stack.size++;
-            for (; j > base && e[j - 1].tnear < next.tnear; --j) e[j] = e[j - 1];
-            e[j] = next;
+            auto* j = stack.top++;
+            for (; j > base && j[-1].tnear < next.tnear; --j) *j = j[-1];
+            *j = next;
         }
-        return e[--stack.size];
+        return *--stack.top;
     }
 }
 

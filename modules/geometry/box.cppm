@@ -67,7 +67,8 @@ template <typename T, typename S>
 // The per-ray constants of the fused slab test: the plane distances measured from the near and
 // far origins are fma(plane, inv_dir, -offset) with offset = origin · inv_dir rounded once per
 // ray, one instruction per plane instead of a subtraction and a product (Embree's form).
-// `usable` says, lane by lane, whether the fused form applies: inv_dir and both offsets finite. Otherwise (a zero or infinite direction component, an origin so far out
+// `usable` says, lane by lane, whether the fused form applies: inv_dir finite and non-zero, and
+// both offsets finite. Otherwise (a zero or infinite direction component, an origin so far out
 // that origin · inv_dir overflows) the ray keeps the subtraction form (intersect_slabs), whose
 // infinities and NaN are handled as described at the top of this file.
 //
@@ -77,9 +78,8 @@ template <typename T, typename S>
 // by at least 4u·|o| (box_margin_origins) beyond what the watertight test needs, which absorbs
 // that move; the rounding of r and of the fma is covered by the far scale 1 + 2γ3 as in Ize's
 // analysis (there, three roundings). With finite non-zero r and finite offsets no NaN can arise:
-// an empty slot's infinite planes give infinite distances of the right sign (r = 0, from an
-// infinite direction component, gives NaN there as in the subtraction form; such slots are
-// masked by the traversal).
+// an empty box's infinite planes (min +inf, max -inf) give tnear = +inf and tfar = -inf, a miss
+// whatever tmin and tmax are, so the 8-wide node test needs no mask of used slots in this form.
 template <typename T>
 struct slab_offsets {
     vec3<T> near_offset, far_offset;
@@ -100,7 +100,8 @@ template <typename T>
         finite = finite + (inv_dir[axis] - inv_dir[axis]) + (s.near_offset[axis] - s.near_offset[axis]) +
                  (s.far_offset[axis] - s.far_offset[axis]);
     }
-    s.usable = finite == T(simd::scalar_type_t<T>(0));
+    T const zero(simd::scalar_type_t<T>(0));
+    s.usable = (finite == zero) & (inv_dir.x != zero) & (inv_dir.y != zero) & (inv_dir.z != zero);
     return s;
 }
 
@@ -198,7 +199,7 @@ template <typename T, typename S>
         far_origin = from_lanes(far);
         slabs.near_offset = from_lanes(near_offset);
         slabs.far_offset = from_lanes(far_offset);
-        slabs.usable = (simd::movemask(finite == float4(0.0f)) & 7u) == 7u;
+        slabs.usable = (simd::movemask((finite == float4(0.0f)) & (inv != float4(0.0f))) & 7u) == 7u;
     } else {
         box_margin_origins(ray, inv_dir, bounds, near_origin, far_origin);
         slabs = fused_slab_offsets(inv_dir, near_origin, far_origin);
