@@ -702,6 +702,29 @@ TEST_CASE("the traversal's box test (widened origins, fused where it applies) ne
     CHECK(nonzero > 59000);
 }
 
+TEST_CASE("a ray with an infinite direction component keeps the subtraction form of the box test") {
+    // Its inverse direction is 0 there: the fused form would turn an empty box's infinite planes
+    // into NaN, and the 8-wide node test relies on the fused form never doing so (it drops the
+    // mask of unused slots), so such rays take the subtraction form, which masks them.
+    canopy::aabb const box{{0, 0, 0}, {1, 1, 1}};
+    for (int axis = 0; axis < 3; ++axis) {
+        for (float sign : {1.0f, -1.0f}) {
+            vec3<float> direction(0.5f, 0.25f, 0.125f);
+            direction[axis] = sign * inf;
+            canopy::prepared_ray<float> prepared(make_ray({0.5f, 0.5f, 0.5f}, direction), false);
+            prepared.widen_box_tests_for(box);
+            INFO("axis " << axis << ", sign " << sign);
+            CHECK(prepared.inv_dir[axis] == 0.0f);
+            CHECK_FALSE(canopy::uses_fused_slabs(prepared));
+            // Same ray with a finite direction: the fused form where the build has FMA.
+            direction[axis] = sign * 2.0f;
+            canopy::prepared_ray<float> finite(make_ray({0.5f, 0.5f, 0.5f}, direction), false);
+            finite.widen_box_tests_for(box);
+            CHECK(canopy::uses_fused_slabs(finite) == canopy::simd::native_fma);
+        }
+    }
+}
+
 TEST_CASE("ray/box slab test: grazing faces and edges, zero direction components, NaN") {
     canopy::aabb const box{{0, 0, 0}, {1, 1, 1}};
     for (int axis = 0; axis < 3; ++axis) {

@@ -150,10 +150,17 @@ template <bool Fused>
     using simd::float8;
     constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
     float8 tnear = ray.tmin;
-    float8 tfar(std::numeric_limits<float>::infinity());
+    float8 tfar;
+    if constexpr (Fused) {
+        // No NaN in this form (canopy.geometry:box, slab_offsets): the first far distance is the
+        // minimum so far, with no +inf to start from.
+        tfar = ray.distance(node, ray.far_row[0], ray.far_term, 0);
+    } else {
+        tfar = float8(std::numeric_limits<float>::infinity());
+    }
     for (std::size_t a = 0; a < 3; ++a) {
         tnear = simd::max(ray.distance(node, ray.near_row[a], ray.near_term, a), tnear);
-        tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, a), tfar);
+        if (!Fused || a > 0) tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, a), tfar);
     }
     tfar = simd::min(tfar * float8(far_scale), ray.box_tmax8);
     child_hits<float> h;
