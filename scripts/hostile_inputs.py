@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-# Hostile-input battery for the `canopy` command line (issue 15: nothing crashes, hangs, blows up
+# Hostile-input battery for the `canopy` command line (nothing crashes, hangs, blows up
 # or lies). Entry point: scripts/hostile_inputs.sh [--quick] [--canopy PATH] [--jobs N]
 # [--limit-kib N] [--timeout S] [--keep] [FILTER...].
 #

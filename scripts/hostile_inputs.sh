@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Hostile-input battery for the canopy command line (issue 15): generates malformed, huge, deep,
+# Hostile-input battery for the canopy command line: generates malformed, huge, deep,
 # special-file and degenerate inputs in a temporary folder and runs each through `canopy info`,
 # `render` or `trace` under `ulimit -v` (4 GiB) and `timeout` (30 s); each case has an expected
 # outcome (an error naming the file and the problem, or a success) and is classified ok, crash,

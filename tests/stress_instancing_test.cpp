@@ -1,4 +1,4 @@
-// The numerical stress battery, instancing part (SPEC §3.8, §4; issue 6, item 12): identity
+// The numerical stress battery, instancing part (SPEC §3.8, §4): identity
 // instances give bit-identical results to no instance, and instances with power-of-two scales,
 // rotations and two levels give the closest hit of a world-space brute force in double precision
 // (world-space vertices computed in double from the float transforms, a double ray, a plain
