@@ -2,7 +2,7 @@
 //
 //   canopy_bench_embree [--scenes sphere,terrain,soup,forest,engine,bunny,slivers]
 //                       [--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2]
-//                       [--rays primary,random,shadow] [--quality automatic|fast|high]
+//                       [--rays primary,random,shadow] [--quality automatic|fast|high] [--coherent]
 //
 // Scenes (canopy.bench_scenes, bench/bench_scenes.cppm): a 1.3M-triangle icosphere, a 2M-triangle
 // terrain, a 500k triangle soup, a forest of 10,000 instances of a 51k-triangle tree, two real
@@ -33,6 +33,14 @@
 // whose hit/miss differs between the libraries, and for closest hits the rays both hit whose
 // (instance, primitive) differs (informational: ties and near-ties may go either way).
 //
+// --coherent adds, for each ray set and query with no intersector, Canopy's batch queries
+// (canopy.query:batch: coherent groups of 8 rays as packets) against Embree's coherent modes:
+// packets of 8 (rtcIntersect8 / rtcOccluded8), packets of 16, and streams (rtcIntersect1M /
+// rtcOccluded1M over each range, RTC_INTERSECT_CONTEXT_FLAG_COHERENT). Each library sees the
+// rays in the same order, in ranges of whole groups of 16. The row's Embree figure is its best
+// mode (by median), named in the row with the other two; the row also gives Canopy's batch against
+// its own single rays, timed in the same rounds.
+//
 // --quality high builds Canopy's meshes with spatial splits (build_quality::high) and Embree's
 // scenes and triangle geometries with RTC_BUILD_QUALITY_HIGH (its split BVH); the default,
 // automatic (the library's default: spatial splits only where sliver_box_share says they pay),
@@ -40,13 +48,16 @@
 //
 // Output: Markdown, one table per scene.
 #include <algorithm>
+#include <array>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <functional>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -54,6 +65,7 @@
 #include <memory>
 #include <optional>
 #include <random>
+#include <span>
 #include <string>
 #include <string_view>
 #include <tuple>
@@ -74,6 +86,7 @@ using canopy::bench::bench_scene;
 using canopy::bench::build_canopy;
 using canopy::bench::canopy_scene;
 using canopy::bench::canopy_trace;
+using canopy::bench::canopy_trace_batch;
 using canopy::bench::counting_intersector;
 using canopy::bench::make_rays;
 using canopy::bench::ray_set;
@@ -198,6 +211,90 @@ canopy::bench_hit embree_trace(embree_scene const& s, canopy::ray const& r, bool
     return {0.0f, canopy::occluded_unreported, canopy::invalid_id, 0.0f, 0.0f};
 }
 
+// ---- coherent rays: Embree's packets and streams, Canopy's batch queries ------------------------
+
+canopy::bench_hit embree_result(bool closest, bool hit, float t, unsigned prim, unsigned inst, float u, float v,
+                                bool instanced) {
+    if (!hit) return {};
+    if (!closest) return {0.0f, canopy::occluded_unreported, canopy::invalid_id, 0.0f, 0.0f};
+    return {t, prim, instanced ? inst : canopy::invalid_id, u, v};
+}
+
+// Rays [0, rays.size()) in packets of N (the last one with invalid lanes past the end).
+template <int N>
+void embree_trace_packets(embree_scene const& s, std::span<canopy::ray const> rays, bool closest,
+                          canopy::bench_hit* out) {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    for (std::size_t first = 0; first < rays.size(); first += N) {
+        std::size_t const count = std::min<std::size_t>(N, rays.size() - first);
+        alignas(64) int valid[N];
+        alignas(64) RTCRayHitNt<N> rh{};
+        for (std::size_t k = 0; k < std::size_t(N); ++k) {
+            valid[k] = k < count ? -1 : 0;
+            RTCRay const r = canopy_bench::embree_ray(rays[first + std::min(k, count - 1)]);
+            rh.ray.org_x[k] = r.org_x, rh.ray.org_y[k] = r.org_y, rh.ray.org_z[k] = r.org_z;
+            rh.ray.dir_x[k] = r.dir_x, rh.ray.dir_y[k] = r.dir_y, rh.ray.dir_z[k] = r.dir_z;
+            rh.ray.tnear[k] = r.tnear, rh.ray.tfar[k] = r.tfar, rh.ray.mask[k] = r.mask;
+            rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+            rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+        }
+        if constexpr (N == 8) {
+            if (closest) rtcIntersect8(valid, s.root(), &context, reinterpret_cast<RTCRayHit8*>(&rh));
+            else rtcOccluded8(valid, s.root(), &context, reinterpret_cast<RTCRay8*>(&rh.ray));
+        } else {
+            static_assert(N == 16);
+            if (closest) rtcIntersect16(valid, s.root(), &context, reinterpret_cast<RTCRayHit16*>(&rh));
+            else rtcOccluded16(valid, s.root(), &context, reinterpret_cast<RTCRay16*>(&rh.ray));
+        }
+        for (std::size_t k = 0; k < count; ++k) {
+            bool const hit = closest ? rh.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID
+                                     : rh.ray.tfar[k] == -std::numeric_limits<float>::infinity();
+            out[first + k] = embree_result(closest, hit, rh.ray.tfar[k], rh.hit.primID[k], rh.hit.instID[0][k],
+                                           rh.hit.u[k], rh.hit.v[k], s.instanced);
+        }
+    }
+}
+
+// Rays [0, rays.size()) as one stream.
+void embree_trace_stream(embree_scene const& s, std::span<canopy::ray const> rays, bool closest,
+                         canopy::bench_hit* out) {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    auto const m = unsigned(rays.size());
+    if (closest) {
+        thread_local std::vector<RTCRayHit> rh;
+        rh.resize(rays.size());
+        for (std::size_t i = 0; i < rays.size(); ++i) rh[i] = canopy_bench::embree_ray_hit(rays[i]);
+        rtcIntersect1M(s.root(), &context, rh.data(), m, sizeof(RTCRayHit));
+        for (std::size_t i = 0; i < rays.size(); ++i)
+            out[i] = embree_result(true, rh[i].hit.geomID != RTC_INVALID_GEOMETRY_ID, rh[i].ray.tfar, rh[i].hit.primID,
+                                   rh[i].hit.instID[0], rh[i].hit.u, rh[i].hit.v, s.instanced);
+    } else {
+        thread_local std::vector<RTCRay> r;
+        r.resize(rays.size());
+        for (std::size_t i = 0; i < rays.size(); ++i) r[i] = canopy_bench::embree_ray(rays[i]);
+        rtcOccluded1M(s.root(), &context, r.data(), m, sizeof(RTCRay));
+        for (std::size_t i = 0; i < rays.size(); ++i)
+            out[i] = embree_result(false, r[i].tfar == -std::numeric_limits<float>::infinity(), 0.0f, 0, 0, 0.0f,
+                                   0.0f, s.instanced);
+    }
+}
+
+// Canopy's batch query over rays [0, rays.size()), results as the single-ray figures report them.
+void canopy_trace_coherent(canopy_scene const& s, std::span<canopy::ray const> rays, bool closest,
+                           std::vector<canopy::basic_hit_record<float>>& records, canopy::bench_hit* out) {
+    canopy::default_intersector isect;
+    records.resize(rays.size());
+    canopy_trace_batch(s, rays, closest, isect, std::span(records.data(), rays.size()));
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        auto const& hr = records[i];
+        out[i] = hr.hit ? canopy::bench_hit{hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v} : canopy::bench_hit{};
+    }
+}
+
 // ---- measuring ----------------------------------------------------------------------------
 
 // One pass of trace_range(lo, hi) over n rays on the threads allowed; returns Mrays/s.
@@ -206,6 +303,19 @@ double trace_rate(std::size_t n, F const& trace_range) {
     auto const start = clock_type::now();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024),
                       [&](auto const& r) { trace_range(r.begin(), r.end()); });
+    return double(n) / seconds_since(start) * 1e-6;
+}
+
+// The same over whole groups of 16 rays: trace_group(first, last) gets ranges that start at a
+// multiple of 16, so that batch queries and packets see the same groups at any thread count.
+template <typename F>
+double trace_rate_grouped(std::size_t n, F const& trace_group) {
+    constexpr std::size_t group = 16;
+    std::size_t const groups = (n + group - 1) / group;
+    auto const start = clock_type::now();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, groups, 64), [&](auto const& r) {
+        trace_group(r.begin() * group, std::min(r.end() * group, n));
+    });
     return double(n) / seconds_since(start) * 1e-6;
 }
 
@@ -298,6 +408,7 @@ struct settings {
     std::vector<int> threads{1, 2};
     int rounds = 5;
     bool quick = false;
+    bool coherent = false;
     std::vector<std::string> ray_sets{"primary", "random", "shadow"};
     canopy::build_quality quality = canopy::build_quality::automatic; // the library's default
 };
@@ -342,14 +453,73 @@ void measure_figure(traced_scene const& s, ray_set const& set, bool closest, Var
               summarize(rates.embree, true), 2, x);
 }
 
+// Rays whose results differ bit for bit (t, primitive, instance, u, v).
+std::size_t differing(std::vector<canopy::bench_hit> const& a, std::vector<canopy::bench_hit> const& b) {
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        n += std::bit_cast<std::uint32_t>(a[i].t) != std::bit_cast<std::uint32_t>(b[i].t) || a[i].prim != b[i].prim ||
+             a[i].inst != b[i].inst || std::bit_cast<std::uint32_t>(a[i].u) != std::bit_cast<std::uint32_t>(b[i].u) ||
+             std::bit_cast<std::uint32_t>(a[i].v) != std::bit_cast<std::uint32_t>(b[i].v);
+    return n;
+}
+
+// --coherent: Canopy's batch query against Embree's best coherent mode, no intersector (see the
+// top of this file). Five measurements a round, their order reversed every other round.
+void measure_coherent(traced_scene const& s, ray_set const& set, bool closest) {
+    std::size_t const n = set.rays.size();
+    std::span<canopy::ray const> const all(set.rays);
+    std::array<std::vector<canopy::bench_hit>, 5> hits;
+    for (auto& h : hits) h.resize(n);
+    std::array<std::function<void(std::size_t, std::size_t)>, 5> const trace{
+        [&](std::size_t lo, std::size_t hi) {
+            thread_local std::vector<canopy::basic_hit_record<float>> records;
+            canopy_trace_coherent(s.canopy, all.subspan(lo, hi - lo), closest, records, hits[0].data() + lo);
+        },
+        [&](std::size_t lo, std::size_t hi) {
+            canopy::default_intersector isect;
+            for (std::size_t i = lo; i < hi; ++i) hits[1][i] = canopy_trace(s.canopy, set.rays[i], closest, isect);
+        },
+        [&](std::size_t lo, std::size_t hi) {
+            embree_trace_packets<8>(s.embree_plain, all.subspan(lo, hi - lo), closest, hits[2].data() + lo);
+        },
+        [&](std::size_t lo, std::size_t hi) {
+            embree_trace_packets<16>(s.embree_plain, all.subspan(lo, hi - lo), closest, hits[3].data() + lo);
+        },
+        [&](std::size_t lo, std::size_t hi) {
+            embree_trace_stream(s.embree_plain, all.subspan(lo, hi - lo), closest, hits[4].data() + lo);
+        }};
+    std::array<std::vector<double>, 5> rates;
+    for (int round = 0; round < s.rounds; ++round)
+        for (std::size_t j = 0; j < trace.size(); ++j) {
+            std::size_t const k = round % 2 == 0 ? j : trace.size() - 1 - j;
+            rates[k].push_back(trace_rate_grouped(n, trace[k]));
+        }
+    std::array<summary, 5> sums;
+    for (std::size_t k = 0; k < sums.size(); ++k) sums[k] = summarize(rates[k], true);
+    constexpr std::array<char const*, 3> modes{"packet8", "packet16", "stream"};
+    std::size_t best = 2;
+    for (std::size_t k = 3; k < 5; ++k)
+        if (sums[k].median > sums[best].median) best = k;
+    std::size_t const mismatched = differing(hits[0], hits[1]);
+    std::string const figure = fmt::format(
+        "{} {}, batch vs Embree {} (Mrays/s; Embree packet8 / packet16 / stream {:.2f} / {:.2f} / {:.2f}; Canopy "
+        "single {:.2f}, batch / single {:.2f}{})",
+        set.name, closest ? "closest" : "any", modes[best - 2], sums[2].median, sums[3].median, sums[4].median,
+        sums[1].median, sums[0].median / sums[1].median,
+        mismatched == 0 ? "" : fmt::format("; BATCH DIFFERS FROM SINGLE ON {} RAYS", mismatched));
+    print_row(fmt::format("{}", s.threads), figure, sums[0], sums[best], 2,
+              {"–", "–", disagreements(hits[0], hits[best], closest)});
+}
+
 void measure_rays(traced_scene const& s, std::vector<ray_set> const& sets, std::vector<std::string> const& wanted,
-                  work_cache& work) {
+                  bool coherent, work_cache& work) {
     for (auto const& set : sets) {
         if (set.rays.empty() || std::find(wanted.begin(), wanted.end(), set.name) == wanted.end()) continue;
         for (bool closest : {true, false}) {
             if (set.shadow && closest) continue;
             std::apply([&](auto const&... variant) { (measure_figure(s, set, closest, variant, work), ...); },
                        intersector_variants);
+            if (coherent) measure_coherent(s, set, closest);
         }
     }
 }
@@ -409,7 +579,7 @@ void run_scene(bench_scene const& in, settings const& opt) {
         print_row(fmt::format("{}", threads), "build (ms; ratio > 1: Canopy slower)", summarize(builds.canopy, false),
                   summarize(builds.embree, false), 1);
 
-        measure_rays({threads, opt.rounds, *cs, *es, *es_alpha}, sets, opt.ray_sets, work);
+        measure_rays({threads, opt.rounds, *cs, *es, *es_alpha}, sets, opt.ray_sets, opt.coherent, work);
         es.reset();
         es_alpha.reset();
         rtcReleaseDevice(device);
@@ -439,8 +609,8 @@ std::optional<settings> parse_command_line(int argc, char** argv) {
     settings opt;
     for (int i = 1; i < argc; ++i) {
         std::string const name = argv[i];
-        if (name == "--quick") {
-            opt.quick = true;
+        if (name == "--quick" || name == "--coherent") {
+            (name == "--quick" ? opt.quick : opt.coherent) = true;
             continue;
         }
         if (i + 1 == argc) return std::nullopt;
@@ -515,7 +685,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr,
                      "usage: %s [--scenes sphere,terrain,soup,forest,engine,bunny,slivers] "
                      "[--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2] "
-                     "[--rays primary,random,shadow] [--quality automatic|fast|high]\n",
+                     "[--rays primary,random,shadow] [--quality automatic|fast|high] [--coherent]\n",
                      argv[0]);
         return 2;
     }
