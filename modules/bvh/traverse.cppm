@@ -10,7 +10,10 @@
 //   the ray's constants computed once per BVH (wide_box_ray); one fma per plane where the build
 //   has FMA and the ray's constants are finite (canopy.geometry:box, slab_offsets), else a
 //   subtraction and a product (the loop is built for each, chosen once per ray and BVH);
-// - otherwise (double rays, packets) → the library's box test, once per child box.
+// - packets of float rays with no box hook, when every lane takes the fused form and all lanes
+//   share each direction sign (coherent packets) → one child box at a time against all lanes,
+//   with the packet's constants prepared once per BVH (no per-box choice of form or of planes);
+// - otherwise (double rays, other packets) → the library's box test, once per child box.
 // All three compute the same conservative test (canopy.geometry:box): same hits, same order. The
 // box tests of a ray are widened for its watertight triangle tests once per BVH entered with a
 // new ray (prepared_ray::widen_box_tests_for): no triangle the watertight test would hit sits in
@@ -249,6 +252,77 @@ struct node_tester<T, S, I, Fused> {
     wide_box_ray<Fused> box_ray;
 };
 
+// Packets whose box test needs no hook: one child box at a time against all lanes, with the
+// packet's constants prepared once per BVH entered (as wide_box_ray for scalar rays). Chosen at
+// run time when every lane can take the fused form (canopy.geometry:box, slab_offsets) and all
+// lanes share the sign of each direction component (coherent packets: the batch queries form
+// them so), so that each axis has one near and one far plane row for the whole packet. Lane by
+// lane this is intersect_slabs_fused: the same fma, max and min in the same order, the first far
+// distance standing for min(+inf, it) (no NaN in this form), the same far scale and widened tmax.
+template <typename T, typename S, typename I>
+inline constexpr bool uses_packet_box_test = (simd::simd_width_v<T> > 1) &&
+                                             std::is_same_v<simd::scalar_type_t<T>, float> &&
+                                             std::is_same_v<S, float> &&
+                                             !box_hook_for<I, prepared_ray<T>, basic_aabb<S>, vec3<T>>;
+
+// Whether every lane's inverse direction has the same sign on each axis.
+template <typename T>
+[[gnu::always_inline]] inline bool signs_agree(vec3<T> const& inv_dir) {
+    constexpr std::uint32_t all = (std::uint32_t(1) << simd::simd_width_v<T>) - 1u;
+    for (int a = 0; a < 3; ++a) {
+        std::uint32_t const negative = simd::movemask(inv_dir[a] < T(0.0f));
+        if (negative != 0 && negative != all) return false;
+    }
+    return true;
+}
+
+template <typename T, typename S, typename I>
+    requires uses_packet_box_test<T, S, I>
+struct node_tester<T, S, I, true> {
+    [[gnu::always_inline]] inline node_tester(prepared_ray<T> const& r, I&) : ray(r) {
+        for (int a = 0; a < 3; ++a) {
+            auto const k = std::size_t(a);
+            bool const negative = simd::movemask(r.inv_dir[a] < T(0.0f)) != 0;
+            near_row[k] = negative ? 3 + k : k;
+            far_row[k] = negative ? k : 3 + k;
+            near_term[k] = -r.slabs.near_offset[a];
+            far_term[k] = -r.slabs.far_offset[a];
+        }
+        tmax_changed();
+    }
+
+    [[gnu::always_inline]] inline child_hits<float, std::uint32_t> test(wide_bvh_node<float> const& node,
+                                                                        std::uint32_t lanes) const {
+        constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
+        child_hits<float, std::uint32_t> h;
+        for (int i = 0; i < bvh_width && node.used(i); ++i) {
+            auto const c = std::size_t(i);
+            T tnear = ray.tmin;
+            T tfar;
+            for (std::size_t a = 0; a < 3; ++a) {
+                tnear = simd::max(simd::fma(T(node.planes[near_row[a]][c]), ray.inv_dir[int(a)], near_term[a]), tnear);
+                T const far = simd::fma(T(node.planes[far_row[a]][c]), ray.inv_dir[int(a)], far_term[a]);
+                tfar = a == 0 ? far : simd::min(far, tfar);
+            }
+            tfar = simd::min(tfar * T(far_scale), box_tmax_lanes);
+            std::uint32_t const hit_lanes = simd::movemask(tnear <= tfar) & lanes;
+            if (hit_lanes == 0) continue;
+            h.mask |= 1u << i;
+            h.lanes[c] = hit_lanes;
+            h.tnear[c] = simd::reduce_min(
+                simd::select(simd::mask_type_t<T>::from_bits(hit_lanes), tnear, T(std::numeric_limits<float>::infinity())));
+        }
+        return h;
+    }
+    float box_tmax() const { return box_test_tmax(widest_tmax(ray.tmax)); }
+    [[gnu::always_inline]] inline void tmax_changed() { box_tmax_lanes = box_test_tmax(ray.tmax); }
+
+    prepared_ray<T> const& ray;
+    std::array<T, 3> near_term, far_term; // minus the fused offsets
+    std::array<std::size_t, 3> near_row, far_row;
+    T box_tmax_lanes;
+};
+
 // Starts loading the memory of one pending child (a wide node, or a leaf's primitives) into the
 // cache, so that the loads of all hit children overlap with each other and with the work on the
 // current node, instead of each waiting for memory when its turn comes.
@@ -438,6 +512,9 @@ template <typename T, typename Prim, typename I, hit_collector<T> Query>
     if constexpr (std::is_base_of_v<instance_path, Query>) ray.instances = &query;
     if constexpr (detail::uses_wide_box_test<T, S, I> && simd::native_fma) {
         if (uses_fused_slabs(ray))
+            return detail::traverse_with<detail::node_tester<T, S, I, true>>(ray, b, isect, query);
+    } else if constexpr (detail::uses_packet_box_test<T, S, I> && simd::native_fma) {
+        if (uses_fused_slabs(ray) && detail::signs_agree(ray.inv_dir))
             return detail::traverse_with<detail::node_tester<T, S, I, true>>(ray, b, isect, query);
     }
     return detail::traverse_with<detail::node_tester<T, S, I>>(ray, b, isect, query);
