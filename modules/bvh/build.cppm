@@ -77,14 +77,6 @@ range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::s
     return r;
 }
 
-// Whether the builder bins and sweeps with 4-lane vectors (float boxes, SSE or wider): then the
-// bins live in bin_scratch::vector_bins, else in bin_scratch::bins (centroid_bins, one primitive
-// and one axis at a time). Both give the same bins; the vector sweep forms the SAH costs in float,
-// the other in double, so a near tie may split differently (the benchmark meshes' SAH moved by at
-// most 0.01 %).
-template <typename S>
-inline constexpr bool vector_binning = std::is_same_v<S, float> && simd::native_width<4>;
-
 // Bins refs[begin, end) on the three axes, as centroid_bins::add does one primitive at a time.
 // With vector_binning, the three axes' bin indices come from one vector computation and each
 // bin's box grows by one 4-lane min and max, with the same rules lane by lane (bin_index: NaN and

@@ -163,7 +163,7 @@ struct spatial_scratch {
     explicit spatial_scratch(int bins)
         : object(bins), boxes(std::size_t(bins)), enter(std::size_t(bins)), exit(std::size_t(bins)),
           planes(std::size_t(bins) + 1), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)),
-          parts(std::size_t(bins)) {}
+          parts(std::size_t(bins)), vector_boxes(std::size_t(bins)), vector_parts(std::size_t(bins)) {}
     bin_scratch<S> object;
     std::vector<basic_aabb<S>> boxes;
     std::vector<std::size_t> enter, exit;
@@ -171,6 +171,7 @@ struct spatial_scratch {
     std::vector<basic_aabb<S>> right_boxes;
     std::vector<std::size_t> right_counts;
     std::vector<basic_aabb<S>> parts; // one reference's parts, bin by bin (bin_reference_parts)
+    std::vector<vector_bin> vector_boxes, vector_parts; // the same with vector_binning
 };
 
 // The best spatial split: references left of `position` go left, right of it right, those that
@@ -234,6 +235,51 @@ void bin_reference_parts(basic_triangle<S> const& tri, basic_aabb<S> const& box,
     }
 }
 
+// bin_reference_parts with vector_binning: a point or box in the lanes of one vector (lane 3
+// ignored), the same operations lane by lane (extend and intersection as canopy.math's, the
+// crossing p + d · t), so the bins get the same boxes bit for bit.
+inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_bin const& box, int axis,
+                                       float const* planes, int bins, float scale, int first, int last,
+                                       vector_bin* boxes, vector_bin* parts) {
+    using simd::float4;
+    float const inf = std::numeric_limits<float>::infinity();
+    for (int k = first; k <= last; ++k) parts[k] = {float4(inf), float4(-inf)};
+    auto const extend_by = [](vector_bin& b, float4 const& x) {
+        b.lo = simd::min(x, b.lo);
+        b.hi = simd::max(x, b.hi);
+    };
+    vec3<float> const v[3] = {tri.v0, tri.v1, tri.v2};
+    float4 const lanes[3] = {to_lanes(tri.v0), to_lanes(tri.v1), to_lanes(tri.v2)};
+    int vertex_bin[3];
+    for (int i = 0; i < 3; ++i) {
+        vertex_bin[i] = plane_bin(v[i][axis], planes, bins, scale);
+        extend_by(parts[std::clamp(vertex_bin[i], first, last)], lanes[i]);
+    }
+    auto const on_axis = float4::iota() == float4(float(axis));
+    for (int i = 0; i < 3; ++i) {
+        int lower = i, upper = (i + 1) % 3;
+        if (v[upper][axis] < v[lower][axis]) std::swap(lower, upper);
+        float const p_axis = v[lower][axis], q_axis = v[upper][axis];
+        if (!(p_axis < q_axis)) continue;
+        float const run = q_axis - p_axis;
+        float4 const p = lanes[lower], d = lanes[upper] - p;
+        for (int k = std::max(first, vertex_bin[lower]); k < last; ++k) {
+            float const plane = planes[k + 1];
+            if (!(plane < q_axis)) break;
+            if (!(plane > p_axis)) continue;
+            float4 const x = simd::select(on_axis, float4(plane), p + d * float4((plane - p_axis) / run));
+            extend_by(parts[k], x);
+            extend_by(parts[k + 1], x);
+        }
+    }
+    for (int k = first; k <= last; ++k) {
+        float4 const lo = simd::max(parts[k].lo, box.lo), hi = simd::min(parts[k].hi, box.hi);
+        if ((simd::movemask(lo > hi) & 7u) != 0) continue;
+        boxes[k].lo = simd::min(lo, boxes[k].lo);
+        boxes[k].hi = simd::max(hi, boxes[k].hi);
+    }
+}
+
 template <typename Prim, typename S>
 spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_scratch<S>& scratch,
                                      reference_list<S> const& refs, basic_aabb<S> const& bounds, int bins) {
@@ -250,17 +296,40 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
         std::fill(scratch.boxes.begin(), scratch.boxes.end(), basic_aabb<S>{});
         std::fill(scratch.enter.begin(), scratch.enter.end(), std::size_t(0));
         std::fill(scratch.exit.begin(), scratch.exit.end(), std::size_t(0));
-        for (auto const& r : refs) {
-            int const first = plane_bin(r.box.min[axis], planes, bins, scale);
-            int const last = plane_bin(r.box.max[axis], planes, bins, scale);
-            ++scratch.enter[std::size_t(first)];
-            ++scratch.exit[std::size_t(last)];
-            if (first == last) {
-                scratch.boxes[std::size_t(first)] = extend(scratch.boxes[std::size_t(first)], r.box);
-                continue;
+        if constexpr (vector_binning<S>) {
+            using simd::float4;
+            float const inf = std::numeric_limits<float>::infinity();
+            vector_bin* const boxes = scratch.vector_boxes.data();
+            for (std::size_t k = 0; k < b; ++k) boxes[k] = {float4(inf), float4(-inf)};
+            for (auto const& r : refs) {
+                int const first = plane_bin(r.box.min[axis], planes, bins, scale);
+                int const last = plane_bin(r.box.max[axis], planes, bins, scale);
+                ++scratch.enter[std::size_t(first)];
+                ++scratch.exit[std::size_t(last)];
+                // Lane 3 holds the next member (max.x, prim): ignored.
+                vector_bin const box{float4::load(&r.box.min.x), float4::load(&r.box.max.x)};
+                if (first == last) {
+                    boxes[first].lo = simd::min(box.lo, boxes[first].lo);
+                    boxes[first].hi = simd::max(box.hi, boxes[first].hi);
+                    continue;
+                }
+                bin_reference_parts_vector(ctx.prims[r.prim], box, axis, planes, bins, scale, first, last, boxes,
+                                           scratch.vector_parts.data());
             }
-            bin_reference_parts(ctx.prims[r.prim], r.box, axis, planes, bins, scale, first, last, scratch.boxes.data(),
-                                scratch.parts.data());
+            for (std::size_t k = 0; k < b; ++k) scratch.boxes[k] = {from_lanes(boxes[k].lo), from_lanes(boxes[k].hi)};
+        } else {
+            for (auto const& r : refs) {
+                int const first = plane_bin(r.box.min[axis], planes, bins, scale);
+                int const last = plane_bin(r.box.max[axis], planes, bins, scale);
+                ++scratch.enter[std::size_t(first)];
+                ++scratch.exit[std::size_t(last)];
+                if (first == last) {
+                    scratch.boxes[std::size_t(first)] = extend(scratch.boxes[std::size_t(first)], r.box);
+                    continue;
+                }
+                bin_reference_parts(ctx.prims[r.prim], r.box, axis, planes, bins, scale, first, last,
+                                    scratch.boxes.data(), scratch.parts.data());
+            }
         }
         // From the right: the references leaving bins ≥ k; then from the left: those entering
         // bins < k. Plane k splits there.
