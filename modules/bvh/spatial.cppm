@@ -146,14 +146,14 @@ struct spatial_context {
     double min_overlap = 0.0; // split_overlap × the root's surface area
 };
 
-// Per-task working memory: the object bins, per axis the spatial bins (boxes, references entering
-// and leaving each bin), their planes and the sweep's right sides, and the two sides of a spatial
+// Per-task working memory: the object bins, the spatial bins of the three axes (boxes, references
+// entering and leaving each bin, axis a at a · bins), their planes (axis a at a · (bins + 1)) and the sweep's right sides, and the two sides of a spatial
 // partition.
 template <typename S>
 struct spatial_scratch {
     explicit spatial_scratch(int bins)
-        : object(bins), boxes(std::size_t(bins)), enter(std::size_t(bins)), exit(std::size_t(bins)),
-          planes(std::size_t(bins) + 1), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)),
+        : object(bins), boxes(3 * std::size_t(bins)), enter(3 * std::size_t(bins)), exit(3 * std::size_t(bins)),
+          planes(3 * (std::size_t(bins) + 1)), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)),
           parts(std::size_t(bins)), vector_boxes(std::size_t(bins)), vector_parts(std::size_t(bins)) {}
     bin_scratch<S> object;
     std::vector<basic_aabb<S>> boxes;
@@ -272,72 +272,130 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
     }
 }
 
+// Adds the spatial bins of refs along `axis` (bins between `planes`) to boxes, enter and exit:
+// each bin's box grows by the parts of the references in it, enter / exit count the references
+// whose first / last bin it is. vector_boxes, vector_parts, parts: `bins` entries of scratch.
+template <typename Prim, typename S>
+void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> refs, int axis, S const* planes,
+                 int bins, S scale, basic_aabb<S>* boxes, std::size_t* enter, std::size_t* exit,
+                 vector_bin* vector_boxes, vector_bin* vector_parts, basic_aabb<S>* parts) {
+    if constexpr (vector_binning<S>) {
+        using simd::float4;
+        float const inf = std::numeric_limits<float>::infinity();
+        for (int k = 0; k < bins; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
+        for (auto const& r : refs) {
+            int const first = plane_bin(r.lo[axis], planes, bins, scale);
+            int const last = plane_bin(r.hi[axis], planes, bins, scale);
+            ++enter[first];
+            ++exit[last];
+            // Lane 3 holds the index or the padding: ignored.
+            vector_bin const box{float4::load(&r.lo.x), float4::load(&r.hi.x)};
+            if (first == last) {
+                vector_boxes[first].lo = simd::min(box.lo, vector_boxes[first].lo);
+                vector_boxes[first].hi = simd::max(box.hi, vector_boxes[first].hi);
+                continue;
+            }
+            bin_reference_parts_vector(ctx.prims[r.index], box, axis, planes, bins, scale, first, last, vector_boxes,
+                                       vector_parts);
+        }
+        for (int k = 0; k < bins; ++k)
+            boxes[k] = extend(boxes[k], basic_aabb<S>{from_lanes(vector_boxes[k].lo), from_lanes(vector_boxes[k].hi)});
+    } else {
+        for (auto const& r : refs) {
+            int const first = plane_bin(r.lo[axis], planes, bins, scale);
+            int const last = plane_bin(r.hi[axis], planes, bins, scale);
+            ++enter[first];
+            ++exit[last];
+            if (first == last) {
+                boxes[first] = extend(boxes[first], r.box());
+                continue;
+            }
+            bin_reference_parts(ctx.prims[r.index], r.box(), axis, planes, bins, scale, first, last, boxes, parts);
+        }
+    }
+}
+
+// The cheapest spatial split of refs (bounded by `bounds`) over `bins` planes per axis. Nodes of
+// at least 4 × parallel_threshold references bin in parallel: the three axes of fixed chunks of
+// parallel_threshold references each, merged in chunk order. Boxes merge by min and max and counts
+// by sums, so the bins, and the tree, are the same however the chunks are scheduled.
 template <typename Prim, typename S>
 spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_scratch<S>& scratch,
                                      std::span<prim_ref<S> const> refs, basic_aabb<S> const& bounds, int bins) {
-    spatial_choice<S> best;
     auto const b = std::size_t(bins);
+    bool usable[3] = {};
+    S scale[3] = {};
     for (int axis = 0; axis < 3; ++axis) {
         S const lo = bounds.min[axis], hi = bounds.max[axis];
-        if (!(hi > lo)) continue;
-        S* const planes = scratch.planes.data();
+        usable[axis] = hi > lo;
+        if (!usable[axis]) continue;
+        S* const planes = scratch.planes.data() + std::size_t(axis) * (b + 1);
         for (std::size_t k = 0; k < b; ++k)
             planes[k] = S(double(lo) + (double(hi) - double(lo)) * double(k) / double(bins));
         planes[b] = hi;
-        S const scale = S(bins) / (hi - lo);
-        std::fill(scratch.boxes.begin(), scratch.boxes.end(), basic_aabb<S>{});
-        std::fill(scratch.enter.begin(), scratch.enter.end(), std::size_t(0));
-        std::fill(scratch.exit.begin(), scratch.exit.end(), std::size_t(0));
-        if constexpr (vector_binning<S>) {
-            using simd::float4;
-            float const inf = std::numeric_limits<float>::infinity();
-            vector_bin* const boxes = scratch.vector_boxes.data();
-            for (std::size_t k = 0; k < b; ++k) boxes[k] = {float4(inf), float4(-inf)};
-            for (auto const& r : refs) {
-                int const first = plane_bin(r.lo[axis], planes, bins, scale);
-                int const last = plane_bin(r.hi[axis], planes, bins, scale);
-                ++scratch.enter[std::size_t(first)];
-                ++scratch.exit[std::size_t(last)];
-                // Lane 3 holds the index or the padding: ignored.
-                vector_bin const box{float4::load(&r.lo.x), float4::load(&r.hi.x)};
-                if (first == last) {
-                    boxes[first].lo = simd::min(box.lo, boxes[first].lo);
-                    boxes[first].hi = simd::max(box.hi, boxes[first].hi);
-                    continue;
-                }
-                bin_reference_parts_vector(ctx.prims[r.index], box, axis, planes, bins, scale, first, last, boxes,
-                                           scratch.vector_parts.data());
-            }
-            for (std::size_t k = 0; k < b; ++k) scratch.boxes[k] = {from_lanes(boxes[k].lo), from_lanes(boxes[k].hi)};
-        } else {
-            for (auto const& r : refs) {
-                int const first = plane_bin(r.lo[axis], planes, bins, scale);
-                int const last = plane_bin(r.hi[axis], planes, bins, scale);
-                ++scratch.enter[std::size_t(first)];
-                ++scratch.exit[std::size_t(last)];
-                if (first == last) {
-                    scratch.boxes[std::size_t(first)] = extend(scratch.boxes[std::size_t(first)], r.box());
-                    continue;
-                }
-                bin_reference_parts(ctx.prims[r.index], r.box(), axis, planes, bins, scale, first, last,
-                                    scratch.boxes.data(), scratch.parts.data());
-            }
+        scale[axis] = S(bins) / (hi - lo);
+    }
+    std::fill(scratch.boxes.begin(), scratch.boxes.end(), basic_aabb<S>{});
+    std::fill(scratch.enter.begin(), scratch.enter.end(), std::size_t(0));
+    std::fill(scratch.exit.begin(), scratch.exit.end(), std::size_t(0));
+    std::size_t const chunk = std::max<std::size_t>(ctx.object.options.parallel_threshold, 1);
+    if (refs.size() < 4 * chunk) {
+        for (int axis = 0; axis < 3; ++axis) {
+            if (!usable[axis]) continue;
+            std::size_t const at = std::size_t(axis) * b;
+            bin_spatial(ctx, refs, axis, scratch.planes.data() + std::size_t(axis) * (b + 1), bins, scale[axis],
+                        scratch.boxes.data() + at, scratch.enter.data() + at, scratch.exit.data() + at,
+                        scratch.vector_boxes.data(), scratch.vector_parts.data(), scratch.parts.data());
         }
+    } else {
+        std::size_t const chunks = (refs.size() + chunk - 1) / chunk;
+        std::vector<basic_aabb<S>> boxes(chunks * 3 * b);
+        std::vector<std::size_t> enter(chunks * 3 * b), exit(chunks * 3 * b);
+        parallel_for_chunks(chunks * 3, 1, [&](std::size_t first, std::size_t last) {
+            std::vector<vector_bin> vector_boxes(b), vector_parts(b);
+            std::vector<basic_aabb<S>> parts(b);
+            for (std::size_t t = first; t < last; ++t) {
+                auto const axis = int(t % 3);
+                if (!usable[axis]) continue;
+                std::size_t const begin = (t / 3) * chunk;
+                bin_spatial(ctx, refs.subspan(begin, std::min(chunk, refs.size() - begin)), axis,
+                            scratch.planes.data() + std::size_t(axis) * (b + 1), bins, scale[axis],
+                            boxes.data() + t * b, enter.data() + t * b, exit.data() + t * b, vector_boxes.data(),
+                            vector_parts.data(), parts.data());
+            }
+        });
+        for (std::size_t c = 0; c < chunks; ++c)
+            for (std::size_t k = 0; k < 3 * b; ++k) {
+                std::size_t const from = c * 3 * b + k;
+                scratch.boxes[k] = extend(scratch.boxes[k], boxes[from]);
+                scratch.enter[k] += enter[from];
+                scratch.exit[k] += exit[from];
+            }
+    }
+
+    spatial_choice<S> best;
+    for (int axis = 0; axis < 3; ++axis) {
+        if (!usable[axis]) continue;
+        S const lo = bounds.min[axis], hi = bounds.max[axis];
+        S const* const planes = scratch.planes.data() + std::size_t(axis) * (b + 1);
+        basic_aabb<S> const* const boxes = scratch.boxes.data() + std::size_t(axis) * b;
+        std::size_t const* const enter = scratch.enter.data() + std::size_t(axis) * b;
+        std::size_t const* const exit = scratch.exit.data() + std::size_t(axis) * b;
         // From the right: the references leaving bins ≥ k; then from the left: those entering
         // bins < k. Plane k splits there.
         basic_aabb<S> acc;
         std::size_t n = 0;
         for (std::size_t k = b - 1; k > 0; --k) {
-            acc = extend(acc, scratch.boxes[k]);
-            n += scratch.exit[k];
+            acc = extend(acc, boxes[k]);
+            n += exit[k];
             scratch.right_boxes[k] = acc;
             scratch.right_counts[k] = n;
         }
         acc = basic_aabb<S>{};
         n = 0;
         for (std::size_t k = 1; k < b; ++k) {
-            acc = extend(acc, scratch.boxes[k - 1]);
-            n += scratch.enter[k - 1];
+            acc = extend(acc, boxes[k - 1]);
+            n += enter[k - 1];
             std::size_t const right = scratch.right_counts[k];
             if (n == 0 || right == 0 || !(planes[k] > lo && planes[k] < hi)) continue;
             double const cost = double(surface_area(acc)) * leaf_tests(n, ctx.object.block_size) +
