@@ -1,7 +1,7 @@
 // canopy.bvh:spatial — the `high` quality builder of triangle BVHs (build_quality::high): a split
 // BVH (Stich, Friedrich, Dietrich 2009, "Spatial Splits in Bounding Volume Hierarchies").
 //
-// Each node weighs the best binned object split (the bins of canopy.bvh:build) against the best
+// Each node weighs the best binned object split (the bins of canopy.bvh:object) against the best
 // binned spatial split: planes at equal intervals across the node's box, each triangle reference
 // clipped to the bins it crosses. A reference that straddles the chosen plane goes to both sides,
 // each copy with the box of its triangle's part on that side, unless keeping it whole on one side
@@ -9,7 +9,10 @@
 // where the two sides of the best object split overlap by more than split_overlap of the root's
 // surface area, and add at most split_budget × n references in all: each node's share of the
 // budget goes to its children in proportion to their references, so the tree does not depend on
-// how threads are scheduled.
+// how threads are scheduled. The references live in one array with room for each subtree's budget
+// (Embree's extended ranges, spatial_context); a subtree whose budget is spent is built by
+// canopy.bvh:object's build_node in place. Nodes of 4 × parallel_threshold references and more
+// bin their spatial splits in parallel (find_spatial_split), with the same bins.
 //
 // Guarantees:
 // - every input triangle is referenced by one leaf or more, never twice by one leaf;
