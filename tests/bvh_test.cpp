@@ -584,15 +584,16 @@ namespace {
 // Whether two BVHs are the same tree: node for node in depth-first order the same boxes and
 // counts, leaf for leaf the same triangles in the same order (the nodes' and leaves' positions in
 // their arrays may differ: they follow the order in which threads finished).
-bool same_tree(mesh_bvh const& a, mesh_bvh const& b, std::uint32_t i = 0, std::uint32_t j = 0) {
+template <typename Prim>
+bool same_tree(canopy::bvh<Prim> const& a, canopy::bvh<Prim> const& b, std::uint32_t i = 0, std::uint32_t j = 0) {
     if (a.nodes.empty() || b.nodes.empty()) return a.nodes.empty() && b.nodes.empty();
     auto const& x = a.nodes[i];
     auto const& y = b.nodes[j];
     if (std::memcmp(&x.bounds, &y.bounds, sizeof x.bounds) != 0 || x.count != y.count) return false;
     if (!x.is_leaf()) return same_tree(a, b, x.index, y.index) && same_tree(a, b, x.index + 1, y.index + 1);
     std::vector<std::uint32_t> ids_a, ids_b;
-    canopy::for_each_leaf_primitive(a, x.index, x.count, [&](triangle const& t) { ids_a.push_back(t.prim_id); });
-    canopy::for_each_leaf_primitive(b, y.index, y.count, [&](triangle const& t) { ids_b.push_back(t.prim_id); });
+    canopy::for_each_leaf_primitive(a, x.index, x.count, [&](Prim const& t) { ids_a.push_back(t.prim_id); });
+    canopy::for_each_leaf_primitive(b, y.index, y.count, [&](Prim const& t) { ids_b.push_back(t.prim_id); });
     return ids_a == ids_b;
 }
 
@@ -617,6 +618,18 @@ TEST_CASE("the same tree on one thread and on two, whatever the parallel thresho
             CHECK(same_tree(one, build(1, std::size_t(1) << 30))); // no task, no chunk
         }
     }
+    // Double-precision triangles take the scalar binning: the same, with chunks and without.
+    std::vector<canopy::basic_triangle<double>> slivers;
+    for (auto const& t : test_support::sliver_mesh())
+        slivers.push_back({vec3<double>(t.v0), vec3<double>(t.v1), vec3<double>(t.v2)});
+    auto const build = [&](std::size_t threshold) {
+        return canopy::build_binned_sah(slivers, {.parallel_threshold = threshold, .quality = canopy::build_quality::high});
+    };
+    auto const chunked = build(16), whole = build(std::size_t(1) << 30);
+    std::size_t references = 0;
+    for (auto const& n : chunked.nodes) references += n.is_leaf() ? n.count : 0;
+    CHECK(references > slivers.size()); // spatial splits did happen
+    CHECK(same_tree(chunked, whole));
 }
 
 TEST_CASE("build_quality::high keeps max_depth, and never splits triangles with NaN or infinite coordinates") {
