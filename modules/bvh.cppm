@@ -4,7 +4,7 @@
 // (bvh<instance<bvh<instance<bvh<triangle>>>>>); refit updates a BVH's boxes after its geometry moved.
 // The traversal protocol (:protocol) names what primitives, structures and queries provide, and
 // is where every test goes through the intersector. Partitions export only the public API; the
-// builder's steps (:parallel, :wide, :binning, :spatial, and the detail namespaces) stay inside.
+// builder's steps (:parallel, :wide, :binning, :object, :spatial, and the detail namespaces) stay inside.
 export module canopy.bvh;
 export import canopy.intersector;
 export import :storage;
@@ -12,6 +12,7 @@ export import :protocol;
 export import :parallel;
 export import :wide;
 export import :binning;
+export import :object;
 export import :spatial;
 export import :build;
 export import :traverse;

@@ -2,6 +2,7 @@
 // depth, leaf sizes), statistics, instance bounds, degenerate inputs and refits, each checked by
 // walking the tree independently of the library.
 #include <catch2/catch.hpp>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <array>
@@ -576,6 +577,59 @@ TEST_CASE("build_quality::high references every triangle whole, by input index, 
     auto const slivers = test_support::sliver_mesh();
     mesh_bvh const none = canopy::build_binned_sah(slivers, {.quality = canopy::build_quality::high, .split_budget = 0.0f});
     CHECK(check_split_build(slivers, none, 0.0f, rng) == slivers.size());
+}
+
+namespace {
+
+// Whether two BVHs are the same tree: node for node in depth-first order the same boxes and
+// counts, leaf for leaf the same triangles in the same order (the nodes' and leaves' positions in
+// their arrays may differ: they follow the order in which threads finished).
+template <typename Prim>
+bool same_tree(canopy::bvh<Prim> const& a, canopy::bvh<Prim> const& b, std::uint32_t i = 0, std::uint32_t j = 0) {
+    if (a.nodes.empty() || b.nodes.empty()) return a.nodes.empty() && b.nodes.empty();
+    auto const& x = a.nodes[i];
+    auto const& y = b.nodes[j];
+    if (std::memcmp(&x.bounds, &y.bounds, sizeof x.bounds) != 0 || x.count != y.count) return false;
+    if (!x.is_leaf()) return same_tree(a, b, x.index, y.index) && same_tree(a, b, x.index + 1, y.index + 1);
+    std::vector<std::uint32_t> ids_a, ids_b;
+    canopy::for_each_leaf_primitive(a, x.index, x.count, [&](Prim const& t) { ids_a.push_back(t.prim_id); });
+    canopy::for_each_leaf_primitive(b, y.index, y.count, [&](Prim const& t) { ids_b.push_back(t.prim_id); });
+    return ids_a == ids_b;
+}
+
+} // namespace
+
+TEST_CASE("the same tree on one thread and on two, whatever the parallel threshold, at both qualities") {
+    random_source rng(72);
+    std::vector<std::pair<char const*, std::vector<triangle>>> const inputs{
+        {"slivers", test_support::sliver_mesh()}, {"needles", test_support::needle_soup(rng, 3000, 5.0f, 0.01f)}};
+    for (auto const& [name, input] : inputs) {
+        for (auto const quality : {canopy::build_quality::fast, canopy::build_quality::high}) {
+            INFO(name << (quality == canopy::build_quality::high ? ", high" : ", fast"));
+            // parallel_threshold 16: subtrees of 16 references and more are tasks, and the
+            // spatial bins of nodes of 64 and more are filled in chunks of 16, in parallel.
+            auto const build = [&](std::size_t threads, std::size_t threshold) {
+                tbb::global_control const limit(tbb::global_control::max_allowed_parallelism, threads);
+                return canopy::build_binned_sah(input, {.parallel_threshold = threshold, .quality = quality});
+            };
+            mesh_bvh const one = build(1, 16);
+            CHECK(same_tree(one, build(2, 16)));
+            CHECK(same_tree(one, build(2, 16)));
+            CHECK(same_tree(one, build(1, std::size_t(1) << 30))); // no task, no chunk
+        }
+    }
+    // Double-precision triangles take the scalar binning: the same, with chunks and without.
+    std::vector<canopy::basic_triangle<double>> slivers;
+    for (auto const& t : test_support::sliver_mesh())
+        slivers.push_back({vec3<double>(t.v0), vec3<double>(t.v1), vec3<double>(t.v2)});
+    auto const build = [&](std::size_t threshold) {
+        return canopy::build_binned_sah(slivers, {.parallel_threshold = threshold, .quality = canopy::build_quality::high});
+    };
+    auto const chunked = build(16), whole = build(std::size_t(1) << 30);
+    std::size_t references = 0;
+    for (auto const& n : chunked.nodes) references += n.is_leaf() ? n.count : 0;
+    CHECK(references > slivers.size()); // spatial splits did happen
+    CHECK(same_tree(chunked, whole));
 }
 
 TEST_CASE("build_quality::high keeps max_depth, and never splits triangles with NaN or infinite coordinates") {

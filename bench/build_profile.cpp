@@ -1,0 +1,107 @@
+// build_profile — one scene's mesh BVH built alone, for profilers and for comparing trees:
+// callgrind counts the builder's instructions (toggle on build_mesh), and the fingerprint tells
+// whether two builds (two binaries, one and two threads) gave the same tree.
+//
+//   canopy_bench_build SCENE [--quick] [--quality automatic|fast|high] [--split-budget F]
+//                      [--threads T] [--rounds R]
+//   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers);
+//          the forest builds its tree's mesh
+//
+// Builds R times (default 1) with T worker threads (default: all cores) and prints the tree's
+// triangles, references, nodes, depth, SAH cost, a 64-bit fingerprint of its structure (fingerprint),
+// and the build time of each round (wall clock: meaningless on a busy machine).
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+#include <tbb/global_control.h>
+import canopy.bench_tracing;
+
+namespace {
+
+[[gnu::noinline]] canopy::bvh<canopy::triangle> build_mesh(std::vector<canopy::triangle> const& mesh,
+                                                            canopy::bvh_build_options const& options) {
+    return canopy::build_binned_sah(std::span<canopy::triangle const>(mesh), options);
+}
+
+// FNV-1a over the tree in depth-first order: each node's box and primitive count, each leaf's
+// primitive ids (not the nodes' positions in the array, which depend on thread scheduling).
+std::uint64_t fingerprint(canopy::bvh<canopy::triangle> const& b) {
+    std::uint64_t h = 14695981039346656037ull;
+    auto const mix = [&](void const* data, std::size_t size) {
+        auto const* p = static_cast<unsigned char const*>(data);
+        for (std::size_t i = 0; i < size; ++i) h = (h ^ p[i]) * 1099511628211ull;
+    };
+    if (b.nodes.empty()) return h;
+    std::vector<std::uint32_t> stack{0};
+    while (!stack.empty()) {
+        auto const& n = b.nodes[stack.back()];
+        stack.pop_back();
+        mix(&n.bounds, sizeof n.bounds);
+        mix(&n.count, sizeof n.count);
+        if (n.is_leaf()) {
+            canopy::for_each_leaf_primitive(b, n.index, n.count, [&](canopy::triangle const& t) {
+                mix(&t.prim_id, sizeof t.prim_id);
+            });
+        } else {
+            stack.push_back(n.index + 1);
+            stack.push_back(n.index);
+        }
+    }
+    return h;
+}
+
+int usage(char const* program) {
+    std::fprintf(stderr,
+                 "usage: %s SCENE [--quick] [--quality automatic|fast|high] [--split-budget F] [--threads T] "
+                 "[--rounds R]\n",
+                 program);
+    return 2;
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+    using namespace canopy::bench;
+    if (argc < 2) return usage(argv[0]);
+    std::string const scene_name = argv[1];
+    bool quick = false;
+    int rounds = 1;
+    std::size_t threads = std::thread::hardware_concurrency();
+    canopy::bvh_build_options options;
+    for (int i = 2; i < argc; ++i) {
+        std::string const a = argv[i];
+        if (a == "--quick") quick = true;
+        else if (a == "--quality" && i + 1 < argc) {
+            if (!parse_quality(argv[++i], options.quality)) return usage(argv[0]);
+        } else if (a == "--split-budget" && i + 1 < argc) options.split_budget = float(std::atof(argv[++i]));
+        else if (a == "--threads" && i + 1 < argc) threads = std::size_t(std::max(1, std::atoi(argv[++i])));
+        else if (a == "--rounds" && i + 1 < argc) rounds = std::max(1, std::atoi(argv[++i]));
+        else return usage(argv[0]);
+    }
+    auto const scene = make_bench_scene(scene_name, quick);
+    if (!scene.skipped.empty()) {
+        std::fprintf(stderr, "%s: %s\n", scene_name.c_str(), scene.skipped.c_str());
+        return 1;
+    }
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    for (int r = 0; r < rounds; ++r) {
+        auto const start = std::chrono::steady_clock::now();
+        auto const built = build_mesh(scene.mesh, options);
+        double const ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        auto const st = canopy::compute_stats(built);
+        std::size_t references = 0;
+        for (auto const& n : built.nodes) references += n.is_leaf() ? n.count : 0;
+        std::printf("%s (%s, %zu threads): %zu triangles, %zu references, %zu nodes, depth %d, SAH %.4f, "
+                    "fingerprint %016llx, %.1f ms\n",
+                    scene_name.c_str(), built.quality == canopy::build_quality::high ? "high" : "fast", threads,
+                    st.primitive_count, references, st.node_count, st.depth, st.sah_cost,
+                    static_cast<unsigned long long>(fingerprint(built)), ms);
+    }
+    return 0;
+}

@@ -1,0 +1,321 @@
+// canopy.bvh:object — the object-split builder (build_quality::fast): binned SAH (Wald 2007, "On
+// fast Construction of SAH-based Bounding Volume Hierarchies") over the primitives' centroids on
+// all three axes, subtrees built in parallel (oneTBB task groups). The primitives' boxes are
+// partitioned in place as 32-byte references (prim_ref, Embree's PrimRef); float boxes are binned
+// and swept with 4-lane vectors, the three axes at once (vector_binning). canopy.bvh:build runs it
+// on all the primitives; canopy.bvh:spatial on the subtrees where its budget of references is
+// spent, and bins and partitions its own nodes' references with the same steps (object_split,
+// partition_object).
+//
+// Contract of build_node: every reference of the range ends in exactly one leaf, a leaf's index is
+// the position of its first reference in build_context::refs. Leaves hold at most max_leaf_size
+// primitives, except where max_depth stops the recursion or all centroids coincide (then leaves
+// split by index). NaN bounds never crash the builder (they sort into bin 0).
+module;
+// No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
+#pragma STDC FP_CONTRACT OFF
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <bit>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <type_traits>
+#include <utility>
+#include <vector>
+export module canopy.bvh:object;
+import canopy.geometry;
+import :storage;
+import :parallel;
+import :binning;
+
+namespace canopy::detail {
+
+// A primitive's box and its input index: what the builder partitions in place (Embree's PrimRef),
+// so that every pass over a node's primitives reads consecutive memory instead of gathering boxes
+// through an index array. 32 bytes for float: one box in two 4-lane loads (the index and the
+// padding ride in lane 3, which the binning ignores).
+template <typename S>
+struct prim_ref {
+    vec3<S> lo;
+    std::uint32_t index = 0;
+    vec3<S> hi;
+    std::uint32_t unused = 0;
+
+    // Twice the box's centre: the builder bins lo + hi, which splits exactly where the centre
+    // would (halving is exact), one operation fewer per primitive and per pass.
+    vec3<S> doubled_center() const { return lo + hi; }
+    basic_aabb<S> box() const { return {lo, hi}; }
+};
+
+template <typename S>
+struct build_context {
+    std::vector<prim_ref<S>> refs;
+    std::vector<bvh_node<S>>* nodes = nullptr;
+    std::atomic<std::uint32_t> node_count{1};
+    std::atomic<int> depth{0};
+    bvh_build_options options;
+    std::size_t block_size = 1; // primitives tested together in a leaf (see leaf_tests)
+};
+
+// Bounds of refs[begin, end) and of their doubled centres.
+template <typename S>
+range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::size_t end) {
+    range_bounds<S> r;
+    for (std::size_t i = begin; i < end; ++i) {
+        r.bounds = extend(r.bounds, ctx.refs[i].box());
+        r.centroids = extend(r.centroids, ctx.refs[i].doubled_center());
+    }
+    return r;
+}
+
+// Bins refs[begin, end) on the three axes, as centroid_bins::add does one primitive at a time.
+// With vector_binning, the three axes' bin indices come from one vector computation and each
+// bin's box grows by one 4-lane min and max, with the same rules lane by lane (bin_index: NaN and
+// values below the range in bin 0, values above it in the last bin; extend: NaN coordinates
+// ignored), so the bins of every usable axis hold the same boxes and counts (the others, which
+// the sweep skips, are filled too instead of tested for).
+template <typename S>
+void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::size_t begin, std::size_t end,
+              bin_scratch<S>& scratch) {
+    if constexpr (vector_binning<S>) {
+        using simd::float4;
+        using simd::int4;
+        std::size_t const n = 3 * std::size_t(binning.bins);
+        vector_bin* const boxes = scratch.vector_bins.data();
+        std::uint32_t* const counts = scratch.vector_counts.data();
+        float const inf = std::numeric_limits<float>::infinity();
+        for (std::size_t k = 0; k < n; ++k) {
+            boxes[k] = {float4(inf), float4(-inf)};
+            counts[k] = 0;
+        }
+        float4 const lo = to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]));
+        float4 const scale = to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]));
+        float4 const last(float(binning.bins - 1));
+        int4 const first_of_axis = int4::iota() * int4(binning.bins);
+        for (std::size_t i = begin; i < end; ++i) {
+            float4 const box_lo = float4::load(&refs[i].lo.x), box_hi = float4::load(&refs[i].hi.x);
+            // max(f, 0) takes 0 for NaN (the second operand), as bin_index does.
+            float4 const f = simd::min(simd::max((box_lo + box_hi - lo) * scale, float4(0.0f)), last);
+            alignas(16) std::int32_t slot[4];
+            (simd::convert_to_int(f) + first_of_axis).store_aligned(slot);
+            for (int a = 0; a < 3; ++a) {
+                auto& b = boxes[std::size_t(slot[a])];
+                b.lo = simd::min(box_lo, b.lo);
+                b.hi = simd::max(box_hi, b.hi);
+                ++counts[std::size_t(slot[a])];
+            }
+        }
+    } else {
+        bin<S>* const bin_data = scratch.bins.data();
+        binning.clear(bin_data);
+        for (std::size_t i = begin; i < end; ++i) binning.add(bin_data, refs[i].box(), refs[i].doubled_center());
+    }
+}
+
+// centroid_bins::best_split over the vector bins: the sweeps of the three axes run together, one
+// axis per lane, on the bins transposed (lane a of plane row c, bin k: coordinate c of the box
+// of bin k on axis a). Each lane computes the float areas of canopy.math's surface_area with the
+// same operations; the costs are formed in float (sweep_object_bins forms them in double), and
+// the first cheapest boundary of the lowest axis wins, as in sweep_object_bins' scan.
+template <typename S>
+    requires vector_binning<S>
+split_choice best_split_vector(centroid_bins<S> const& binning, bin_scratch<S>& scratch, std::size_t count,
+                               std::size_t block_size) {
+    using simd::float4;
+    using simd::int4;
+    std::size_t const bins = std::size_t(binning.bins);
+    float4* const plane = scratch.sweep_boxes.data(); // row c (min x, y, z, max x, y, z) at c * bins
+    int4* const bin_count = scratch.sweep_counts.data();
+    for (std::size_t k = 0; k < bins; ++k) {
+        alignas(16) float rows[6][4] = {};
+        alignas(16) std::int32_t n[4] = {};
+        for (std::size_t a = 0; a < 3; ++a) {
+            alignas(16) float l[4], h[4];
+            scratch.vector_bins[a * bins + k].lo.store_aligned(l);
+            scratch.vector_bins[a * bins + k].hi.store_aligned(h);
+            for (std::size_t c = 0; c < 3; ++c) {
+                rows[c][a] = l[c];
+                rows[3 + c][a] = h[c];
+            }
+            n[a] = std::int32_t(scratch.vector_counts[a * bins + k]);
+        }
+        for (std::size_t c = 0; c < 6; ++c) plane[c * bins + k] = float4::load_aligned(rows[c]);
+        bin_count[k] = int4::load_aligned(n);
+    }
+    // surface_area of each lane's box (canopy.math): 2 · (dx·dy + dy·dz + dz·dx), 0 when empty.
+    auto const area = [](std::array<float4, 6> const& box) {
+        float4 const dx = box[3] - box[0], dy = box[4] - box[1], dz = box[5] - box[2];
+        auto const empty = ((box[0] > box[3]) | (box[1] > box[4])) | (box[2] > box[5]);
+        return simd::select(empty, float4(0.0f), float4(2.0f) * (dx * dy + dy * dz + dz * dx));
+    };
+    auto const empty_box = [] {
+        float const inf = std::numeric_limits<float>::infinity();
+        return std::array<float4, 6>{float4(inf), float4(inf), float4(inf), float4(-inf), float4(-inf), float4(-inf)};
+    };
+    // extend(acc, bin k): min(bin, acc) and max(bin, acc), as canopy.math's extend.
+    auto const take = [&](std::array<float4, 6>& acc, std::size_t k) {
+        for (std::size_t c = 0; c < 3; ++c) {
+            acc[c] = simd::min(plane[c * bins + k], acc[c]);
+            acc[3 + c] = simd::max(plane[(3 + c) * bins + k], acc[3 + c]);
+        }
+    };
+    // The costs of all boundaries, lane by lane: area × blocks on each side (blocks: leaf_tests,
+    // by shift; block sizes are powers of two), formed in float as Embree's binner forms them.
+    int const shift = std::countr_zero(block_size);
+    int4 const round_up(std::int32_t(block_size) - 1);
+    auto const blocks = [&](int4 n) { return simd::convert_to_float((n + round_up) >> shift); };
+    float4* const right_cost = scratch.sweep_right.data();
+    auto acc = empty_box();
+    int4 n(0);
+    for (std::size_t k = bins - 1; k > 0; --k) {
+        take(acc, k);
+        n = n + bin_count[k];
+        right_cost[k] = area(acc) * blocks(n);
+    }
+    // From the left: the cheapest boundary of each axis (lane), the first one on ties, among
+    // those that leave both sides non-empty.
+    float const inf = std::numeric_limits<float>::infinity();
+    acc = empty_box();
+    n = int4(0);
+    int4 const all = int4(std::int32_t(count));
+    float4 best_cost(inf);
+    int4 best_k(0);
+    for (std::size_t k = 1; k < bins; ++k) {
+        take(acc, k - 1);
+        n = n + bin_count[k - 1];
+        float4 const cost = area(acc) * blocks(n) + right_cost[k];
+        auto const better = (cost < best_cost) & (n != int4(0)) & (n != all);
+        best_cost = simd::select(better, cost, best_cost);
+        best_k = simd::select(better, int4(std::int32_t(k)), best_k);
+    }
+    alignas(16) float costs[4];
+    alignas(16) std::int32_t ks[4];
+    best_cost.store_aligned(costs);
+    best_k.store_aligned(ks);
+    split_choice best;
+    for (std::size_t a = 0; a < 3; ++a)
+        if (binning.usable[a] && double(costs[a]) < best.cost) best = {double(costs[a]), int(a), int(ks[a])};
+    return best;
+}
+
+// centroid_bins::side_bounds over the vector bins.
+template <typename S>
+    requires vector_binning<S>
+void side_bounds_vector(centroid_bins<S> const& binning, bin_scratch<S> const& scratch, split_choice const& split,
+                        basic_aabb<S>& left, basic_aabb<S>& right) {
+    vector_bin const* const b = scratch.vector_bins.data() + std::size_t(split.axis * binning.bins);
+    float const inf = std::numeric_limits<float>::infinity();
+    vector_bin sides[2] = {{simd::float4(inf), simd::float4(-inf)}, {simd::float4(inf), simd::float4(-inf)}};
+    for (int k = 0; k < binning.bins; ++k) {
+        auto& side = sides[k < split.split ? 0 : 1];
+        side.lo = simd::min(b[k].lo, side.lo);
+        side.hi = simd::max(b[k].hi, side.hi);
+    }
+    left = {from_lanes(sides[0].lo), from_lanes(sides[0].hi)};
+    right = {from_lanes(sides[1].lo), from_lanes(sides[1].hi)};
+}
+
+// The cheapest object split of refs[begin, end) (count of them) by the SAH, binned over `binning`
+// in one pass over the references. Small nodes use one bin per primitive at most (bins_for): the
+// sweep costs O(bins) whatever the count.
+inline int bins_for(int bins, std::size_t count) {
+    return int(std::min<std::size_t>(std::size_t(bins), std::max<std::size_t>(count, 2)));
+}
+
+template <typename S>
+split_choice object_split(build_context<S> const& ctx, bin_scratch<S>& scratch, centroid_bins<S> const& binning,
+                          std::size_t begin, std::size_t end) {
+    bin_refs(binning, ctx.refs.data(), begin, end, scratch);
+    if constexpr (vector_binning<S>)
+        return best_split_vector(binning, scratch, end - begin, ctx.block_size);
+    else
+        return binning.best_split(scratch.bins.data(), end - begin, ctx.block_size, scratch.right_cost);
+}
+
+// The boxes of the references on each side of `best` (the unions of their bins).
+template <typename S>
+void object_side_bounds(bin_scratch<S> const& scratch, centroid_bins<S> const& binning, split_choice const& best,
+                        basic_aabb<S>& left, basic_aabb<S>& right) {
+    if constexpr (vector_binning<S>)
+        side_bounds_vector(binning, scratch, best, left, right);
+    else
+        binning.side_bounds(scratch.bins.data(), best, left, right);
+}
+
+// Partitions refs[begin, end) in place by the bin boundary `best` found by object_split (or by
+// index when best.axis < 0: the centroids coincide), gathering the two sides' bounds and centroid
+// bounds on the way; returns where the right side starts.
+template <typename S>
+std::size_t partition_object(build_context<S>& ctx, bin_scratch<S> const& scratch, centroid_bins<S> const& binning,
+                             split_choice const& best, std::size_t begin, std::size_t end, range_bounds<S>& left,
+                             range_bounds<S>& right) {
+    if (best.axis < 0) {
+        std::size_t const mid = begin + (end - begin) / 2;
+        left = bounds_of(ctx, begin, mid);
+        right = bounds_of(ctx, mid, end);
+        return mid;
+    }
+    prim_ref<S>* const refs = ctx.refs.data();
+    std::size_t i = begin, j = end;
+    while (i < j) {
+        vec3<S> const c = refs[i].doubled_center();
+        if (binning.index(best.axis, c[best.axis]) < best.split) {
+            left.centroids = extend(left.centroids, c);
+            ++i;
+        } else {
+            right.centroids = extend(right.centroids, c);
+            std::swap(refs[i], refs[--j]);
+        }
+    }
+    object_side_bounds(scratch, binning, best, left.bounds, right.bounds);
+    return i;
+}
+
+// Builds the subtree of refs[begin, end) into nodes[node_index]; `range` holds the bounds of
+// those primitives and of their doubled centres (the parent computes them while partitioning, so
+// no node walks its primitives just for that).
+template <typename S>
+void build_node(build_context<S>& ctx, bin_scratch<S>& scratch, std::uint32_t node_index, std::size_t begin,
+                std::size_t end, int depth, range_bounds<S> const& range) {
+    auto& nodes = *ctx.nodes;
+    auto const& opt = ctx.options;
+    std::size_t const count = end - begin;
+    basic_aabb<S> const& bounds = range.bounds;
+    nodes[node_index].bounds = bounds;
+
+    int prev = ctx.depth.load(std::memory_order_relaxed);
+    while (prev < depth + 1 && !ctx.depth.compare_exchange_weak(prev, depth + 1)) {}
+
+    auto make_leaf = [&] {
+        nodes[node_index].index = std::uint32_t(begin);
+        nodes[node_index].count = std::uint32_t(count);
+    };
+    if (count == 1 || depth + 1 >= opt.max_depth) return make_leaf();
+
+    centroid_bins<S> const binning(range.centroids, bins_for(opt.bins, count));
+    split_choice const best = object_split(ctx, scratch, binning, begin, end);
+    if (leaf_is_cheaper(opt, count, ctx.block_size, double(surface_area(bounds)), best)) return make_leaf();
+
+    range_bounds<S> left, right;
+    std::size_t const mid = partition_object(ctx, scratch, binning, best, begin, end, left, right);
+
+    std::uint32_t const children = ctx.node_count.fetch_add(2, std::memory_order_relaxed);
+    nodes[node_index].index = children;
+    nodes[node_index].count = 0;
+    if (count >= opt.parallel_threshold) {
+        parallel_invoke(
+            [&] {
+                bin_scratch<S> own(opt.bins);
+                build_node(ctx, own, children, begin, mid, depth + 1, left);
+            },
+            [&] { build_node(ctx, scratch, children + 1, mid, end, depth + 1, right); });
+    } else {
+        build_node(ctx, scratch, children, begin, mid, depth + 1, left);
+        build_node(ctx, scratch, children + 1, mid, end, depth + 1, right);
+    }
+}
+
+} // namespace canopy::detail
