@@ -91,6 +91,12 @@ struct child_hits {
     [[no_unique_address]] std::conditional_t<std::is_same_v<L, no_lanes>, no_lanes, std::array<L, bvh_width>> lanes;
 };
 
+// The rows of wide_bvh_node::planes that hold axis a's near and far planes for a ray that runs
+// towards negative a (an inverse direction below 0; 1/-0 = -inf counts as negative, as in
+// canopy.geometry:box): rows a (minima) and 3 + a (maxima), swapped for such rays.
+[[gnu::always_inline]] inline std::size_t near_plane_row(std::size_t a, bool negative) { return negative ? 3 + a : a; }
+[[gnu::always_inline]] inline std::size_t far_plane_row(std::size_t a, bool negative) { return negative ? a : 3 + a; }
+
 // The constants of the 8-wide box test for one scalar float ray, computed once per BVH: in every
 // lane the inverse direction and either the fused test's offsets (Fused: canopy.geometry:box,
 // slab_offsets) or the near and far origins, and which plane row is near and which far on each
@@ -110,10 +116,9 @@ struct wide_box_ray {
                 far_term[k] = simd::float8(ray.far_origin[a]);
             }
             inv_dir[k] = simd::float8(ray.inv_dir[a]);
-            // -0 has no inverse of its own: 1/-0 = -inf counts as negative, as in canopy.geometry:box.
             bool const negative = ray.inv_dir[a] < 0.0f;
-            near_row[k] = negative ? 3 + k : k;
-            far_row[k] = negative ? k : 3 + k;
+            near_row[k] = near_plane_row(k, negative);
+            far_row[k] = far_plane_row(k, negative);
         }
         tmin = simd::float8(ray.tmin);
         set_tmax(ray.tmax);
@@ -283,8 +288,8 @@ struct node_tester<T, S, I, true> {
         for (int a = 0; a < 3; ++a) {
             auto const k = std::size_t(a);
             bool const negative = simd::movemask(r.inv_dir[a] < T(0.0f)) != 0;
-            near_row[k] = negative ? 3 + k : k;
-            far_row[k] = negative ? k : 3 + k;
+            near_row[k] = near_plane_row(k, negative);
+            far_row[k] = far_plane_row(k, negative);
             near_term[k] = -r.slabs.near_offset[a];
             far_term[k] = -r.slabs.far_offset[a];
         }
