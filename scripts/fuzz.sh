@@ -5,7 +5,9 @@
 # non-zero and leaves the input in the work folder's artifacts/).
 #   scripts/fuzz.sh [SECONDS]    total seconds for all fuzzers together, split evenly (default 120;
 #                                at least 10 s each)
-# CANOPY_FUZZ_BUILD sets the build folder (default build/fuzz). Inputs found interesting are kept
+# CANOPY_FUZZ_BUILD names another build folder, already configured with CANOPY_BUILD_FUZZERS=ON and
+# sanitizers (e.g. build/asan, which CI uses); by default build/fuzz, configured with the preset
+# fuzz. Inputs found interesting are kept
 # in <build>/fuzz-work/<fuzzer>/corpus between runs; the committed seeds are fuzz/corpus/<fuzzer>,
 # the dictionaries fuzz/<fuzzer>.dict.
 set -euo pipefail
@@ -14,7 +16,12 @@ here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 source "$here/env.sh"
 cd "$canopy_root"
 build=${CANOPY_FUZZ_BUILD:-build/fuzz}
-cmake --preset fuzz -B "$build" >/dev/null
+if [[ -z ${CANOPY_FUZZ_BUILD:-} ]]; then
+  cmake --preset fuzz -B "$build" >/dev/null
+elif ! grep -q '^CANOPY_BUILD_FUZZERS:BOOL=ON' "$build/CMakeCache.txt" 2>/dev/null; then
+  echo "fuzz: $build is not a build folder configured with CANOPY_BUILD_FUZZERS=ON" >&2
+  exit 2
+fi
 cmake --build "$build" -j2 --target fuzzers
 mapfile -t fuzzers < <(grep -v '^$' "$build/fuzz/fuzzers.txt")
 seconds=$(( total / ${#fuzzers[@]} ))
