@@ -353,13 +353,15 @@ template <typename Prim>
 }
 
 // One pending child: a wide node (count 0) or a leaf, with the distance at which the ray enters it
-// (and, for packets, the lanes that enter it).
+// (and, for packets, the lanes that enter it). No default member initialisers: the stack's array
+// of entries is left uninitialised (a packet's would otherwise be zeroed, ~450 stores, at every
+// traversal); entries are written whole before they are read.
 template <typename S, typename L = no_lanes>
 struct traversal_entry {
     std::uint32_t child;
     std::uint32_t count; // 0: wide node; ≥ 1: leaf
     S tnear;
-    [[no_unique_address]] L lanes{};
+    [[no_unique_address]] L lanes;
 };
 
 // The pending children of one traversal. Depth never exceeds bvh_max_depth, and each level
@@ -405,7 +407,7 @@ template <bool near_first, typename Prim, typename S, typename L>
                                                                    child_hits<S, L> const& hits,
                                                                    traversal_stack<S, L>& stack) {
     auto const entry = [&](std::uint32_t i) {
-        traversal_entry<S, L> e{node.child[i], node.count[i], hits.tnear[i]};
+        traversal_entry<S, L> e{node.child[i], node.count[i], hits.tnear[i], {}};
         if constexpr (!std::is_same_v<L, no_lanes>) e.lanes = hits.lanes[i];
         prefetch_child(b, e.child, e.count);
         return e;
@@ -475,7 +477,7 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
     using L = lanes_t<T>;
     Tester nodes(ray, isect);
     traversal_stack<S, L> stack;
-    traversal_entry<S, L> current{0, 0, S(0)};
+    traversal_entry<S, L> current{0, 0, S(0), {}};
     if constexpr (!std::is_same_v<L, no_lanes>) current.lanes = (1u << simd::simd_width_v<T>) - 1u;
     for (;;) {
         if (current.count == 0) {
