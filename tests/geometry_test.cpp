@@ -838,3 +838,60 @@ TEST_CASE("a block of triangles gives, lane by lane, the one-triangle watertight
         }
     }
 }
+
+TEST_CASE("packets whose lanes share one shear permutation test triangles and block lanes as single rays, bit for bit") {
+    random_source rng(33);
+    int uniform_packets = 0, mixed_packets = 0;
+    for (int i = 0; i < 2000; ++i) {
+        std::vector<triangle> tris;
+        int const used = rng.integer(1, canopy::triangle_block_width);
+        for (int lane = 0; lane < used; ++lane) {
+            triangle t = random_triangle(rng, 5.0f, 2.0f);
+            if (rng.integer(0, 9) == 0) t.v2 = t.v0; // degenerate
+            t.prim_id = std::uint32_t(10 * i + lane);
+            t.geom_id = std::uint32_t(lane);
+            tris.push_back(t);
+        }
+        std::vector<canopy::triangle_block> blocks;
+        canopy::append_triangle_blocks(blocks, tris.begin(), tris.end());
+        REQUIRE(blocks.size() == 1);
+        auto const& target = tris[std::size_t(rng.integer(0, used - 1))];
+
+        // Every other case: a coherent packet (one dominant axis and sign: |d[axis]| ≥ 1 > the
+        // others), aimed at points around the target triangle; else mixed rays.
+        std::array<ray, 8> rays;
+        bool const coherent = i % 2 == 0;
+        if (coherent) {
+            int const axis = rng.integer(0, 2);
+            float const sign = rng.integer(0, 1) == 0 ? 1.0f : -1.0f;
+            for (auto& r : rays) {
+                vec3<float> d(rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f));
+                d[axis] = sign * rng.uniform(1.0f, 2.0f);
+                float const b1 = rng.uniform(-0.2f, 1.0f), b2 = rng.uniform(-0.2f, 1.0f - b1);
+                vec3<float> const p = target.v0 + (target.v1 - target.v0) * b1 + (target.v2 - target.v0) * b2;
+                r = make_ray(p - d * rng.uniform(0.5f, 20.0f), d);
+            }
+            if (rng.integer(0, 3) == 0) rays[5].tmin = quiet_nan; // an inactive lane
+            if (rng.integer(0, 3) == 0) rays[6].tmax = rays[6].tmin - 1;
+        } else {
+            rays = random_rays_for(rng, target);
+        }
+        canopy::prepared_ray<float8> const packet(pack(rays));
+        if (coherent) REQUIRE(packet.shear.uniform);
+        (packet.shear.uniform ? uniform_packets : mixed_packets) += 1;
+        for (int t = 0; t < used; ++t) {
+            auto const& tri = tris[std::size_t(t)];
+            auto const whole = intersect(packet, tri);
+            auto const from_block = canopy::intersect_lane(packet, blocks[0], t);
+            for (int lane = 0; lane < 8; ++lane) {
+                INFO("case " << i << ", triangle " << t << (packet.shear.uniform ? ", uniform" : ", mixed"));
+                auto const one = intersect(rays[std::size_t(lane)], tri);
+                check_lane_equals_scalar(whole, lane, one);
+                check_lane_equals_scalar(from_block, lane, one);
+            }
+        }
+    }
+    // Both paths were taken.
+    CHECK(uniform_packets >= 1000);
+    CHECK(mixed_packets >= 100);
+}

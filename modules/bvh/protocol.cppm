@@ -201,8 +201,8 @@ template <typename Ray, typename Prim, typename I, typename Query>
 }
 
 // The first `count` triangles of a leaf block. A triangle hook of the intersector sees them one
-// at a time, exactly as given (triangle_at), as the paper's API promises. Otherwise, for scalar
-// rays, the block's triangles are tested at once (intersect_block: bit-identical lane by lane;
+// at a time, exactly as given (triangle_at), as the paper's API promises. Otherwise packets test
+// them one at a time, read from the block (intersect_lane); for scalar rays the block's triangles are tested at once (intersect_block: bit-identical lane by lane;
 // degenerate triangles are known from the block and never tested) and the hit lanes go to the
 // filter and the query: in lane order for queries that stop at any hit (the first hit in leaf
 // order, as one at a time would find), by increasing (t, prim_id) otherwise, each while its t is
@@ -210,10 +210,17 @@ template <typename Ray, typename Prim, typename I, typename Query>
 template <typename Ray, typename I, typename Query>
 [[gnu::always_inline]] inline bool call_hooks_or_descend(Ray& ray, triangle_block const& block, int count, I& isect,
                                                          Query& query) {
-    if constexpr (primitive_hook_for<I, Ray, triangle> || !is_prepared_ray_v<Ray> ||
-                  simd::simd_width_v<ray_value_t<Ray>> != 1) {
+    if constexpr (primitive_hook_for<I, Ray, triangle> || !is_prepared_ray_v<Ray>) {
         for (int lane = 0; lane < count; ++lane)
             if (call_hooks_or_descend(ray, block.triangle_at(lane), isect, query)) return true;
+        return false;
+    } else if constexpr (simd::simd_width_v<ray_value_t<Ray>> != 1) {
+        // Packets: one triangle at a time against all lanes (intersect_lane), as the loop above.
+        for (int lane = 0; lane < count; ++lane) {
+            auto hr = intersect_lane(ray, block, lane);
+            apply_filter(ray, hr, isect, query);
+            if (query.report(hr, ray)) return true;
+        }
         return false;
     } else {
         auto const hits = intersect_block(ray, block);

@@ -19,6 +19,7 @@
 module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <span>
@@ -84,8 +85,10 @@ struct watertight_shear {
         }
     }
 
-    int kx = 0, ky = 1, kz = 2;                       // scalar rays
+    int kx = 0, ky = 1, kz = 2;                       // scalar rays; SIMD rays when uniform
     simd::mask_type_t<T> z_is_x{}, z_is_y{}, swap_xy{}; // SIMD rays
+    // SIMD rays: every lane has the same permutation, (kx, ky, kz) above (coherent packets).
+    bool uniform = false;
     T sx{}, sy{}, sz{};
 };
 
@@ -103,6 +106,16 @@ watertight_shear<T> make_watertight_shear(vec3<T> const& dir) {
         s.z_is_y = !s.z_is_x & (a.y >= a.z);
         T const dz = simd::select(s.z_is_x, dir.x, simd::select(s.z_is_y, dir.y, dir.z));
         s.swap_xy = dz < T(0);
+        constexpr std::uint32_t all = (std::uint32_t(1) << simd::simd_width_v<T>) - 1u;
+        auto const same = [](std::uint32_t bits) { return bits == 0 || bits == all; };
+        std::uint32_t const x = simd::movemask(s.z_is_x), y = simd::movemask(s.z_is_y), swap = simd::movemask(s.swap_xy);
+        if (same(x) && same(y) && same(swap)) {
+            s.uniform = true;
+            s.kz = x != 0 ? 0 : (y != 0 ? 1 : 2);
+            s.kx = s.kz == 2 ? 0 : s.kz + 1;
+            s.ky = s.kx == 2 ? 0 : s.kx + 1;
+            if (swap != 0) std::swap(s.kx, s.ky);
+        }
     }
     vec3<T> const d = s.permute(dir);
     s.sx = d.x / d.z;
@@ -204,18 +217,17 @@ template <typename T, typename S>
     return intersect_slabs(ray, box, inv_dir, ray.near_origin, ray.far_origin);
 }
 
-// Woop et al.'s test for a ray whose shear is already known.
-template <typename T, typename S>
-    requires std::is_same_v<simd::scalar_type_t<T>, S>
-[[gnu::always_inline]] inline basic_hit_record<T> intersect_watertight(basic_ray<T> const& ray,
-                                                                       watertight_shear<T> const& shear,
-                                                                       basic_triangle<S> const& tri) {
+// The watertight test from the triangle's vertices translated to the ray origin and permuted
+// into the shear's axis order (a, b, c): shear, edge functions, t. `degenerate()` is asked only
+// for a hit (the exact check in double is the costliest step, and most tests miss).
+template <typename T, typename Degenerate>
+[[gnu::always_inline]] inline basic_hit_record<T> watertight_from_permuted(basic_ray<T> const& ray,
+                                                                           watertight_shear<T> const& shear,
+                                                                           vec3<T> const& a, vec3<T> const& b,
+                                                                           vec3<T> const& c, std::uint32_t prim_id,
+                                                                           std::uint32_t geom_id,
+                                                                           Degenerate&& degenerate) {
     basic_hit_record<T> hr;
-
-    // Translate to the ray origin, permute, shear (each vertex on its own).
-    vec3<T> const a = shear.permute(vec3<T>(tri.v0) - ray.origin);
-    vec3<T> const b = shear.permute(vec3<T>(tri.v1) - ray.origin);
-    vec3<T> const c = shear.permute(vec3<T>(tri.v2) - ray.origin);
     T const ax = a.x - shear.sx * a.z, ay = a.y - shear.sy * a.z;
     T const bx = b.x - shear.sx * b.z, by = b.y - shear.sy * b.z;
     T const cx = c.x - shear.sx * c.z, cy = c.y - shear.sy * c.z;
@@ -232,23 +244,60 @@ template <typename T, typename S>
     T const scaled_t = eu * (shear.sz * a.z) + ev * (shear.sz * b.z) + ew * (shear.sz * c.z);
     T const t = scaled_t / det;
     auto const hit = inside & (det != T(0)) & (t >= ray.tmin) & (t <= ray.tmax);
-    if (simd::none(hit) || is_degenerate(tri)) return hr;
+    if (simd::none(hit) || degenerate()) return hr;
 
-    record_hit(hr, hit, t, ev / det, ew / det, tri.prim_id, tri.geom_id);
+    record_hit(hr, hit, t, ev / det, ew / det, prim_id, geom_id);
     return hr;
+}
+
+// v − origin in the shear's axis order, for a SIMD ray whose lanes share one permutation
+// (shear.uniform): the vertex's components are picked before they are broadcast, with the origin
+// permuted once per ray. The same values as shear.permute(vec3<T>(v) − origin), with no per-lane
+// selects.
+// The vertex's component k is v[k * stride].
+template <typename T, typename S>
+[[gnu::always_inline]] inline vec3<T> uniformly_permuted(watertight_shear<T> const& shear, S const* v,
+                                                         std::size_t stride, vec3<T> const& permuted_origin) {
+    auto const at = [&](int k) { return T(v[std::size_t(k) * stride]); };
+    return {at(shear.kx) - permuted_origin.x, at(shear.ky) - permuted_origin.y, at(shear.kz) - permuted_origin.z};
+}
+
+// Woop et al.'s test for a ray whose shear is already known (and its origin permuted by it).
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+[[gnu::always_inline]] inline basic_hit_record<T> intersect_watertight(basic_ray<T> const& ray,
+                                                                       watertight_shear<T> const& shear,
+                                                                       vec3<T> const& permuted_origin,
+                                                                       basic_triangle<S> const& tri) {
+    auto const degenerate = [&] { return is_degenerate(tri); };
+    if constexpr (simd::simd_width_v<T> != 1) {
+        if (shear.uniform) {
+            S const v0[3] = {tri.v0.x, tri.v0.y, tri.v0.z}, v1[3] = {tri.v1.x, tri.v1.y, tri.v1.z},
+                    v2[3] = {tri.v2.x, tri.v2.y, tri.v2.z};
+            return watertight_from_permuted(ray, shear, uniformly_permuted(shear, v0, 1, permuted_origin),
+                                            uniformly_permuted(shear, v1, 1, permuted_origin),
+                                            uniformly_permuted(shear, v2, 1, permuted_origin), tri.prim_id,
+                                            tri.geom_id, degenerate);
+        }
+    }
+    // Translate to the ray origin, permute (each vertex on its own).
+    return watertight_from_permuted(ray, shear, shear.permute(vec3<T>(tri.v0) - ray.origin),
+                                    shear.permute(vec3<T>(tri.v1) - ray.origin),
+                                    shear.permute(vec3<T>(tri.v2) - ray.origin), tri.prim_id, tri.geom_id, degenerate);
 }
 
 // Watertight ray/triangle test (the default).
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 basic_hit_record<T> intersect(basic_ray<T> const& ray, basic_triangle<S> const& tri) {
-    return intersect_watertight(ray, make_watertight_shear(ray.direction), tri);
+    auto const shear = make_watertight_shear(ray.direction);
+    return intersect_watertight(ray, shear, shear.permute(ray.origin), tri);
 }
 
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 [[gnu::always_inline]] inline basic_hit_record<T> intersect(prepared_ray<T> const& ray, basic_triangle<S> const& tri) {
-    return intersect_watertight(ray, ray.shear, tri);
+    return intersect_watertight(ray, ray.shear, ray.permuted_origin, tri);
 }
 
 // Möller & Trumbore 1997, "Fast, Minimum Storage Ray/Triangle Intersection" (opt-in; not

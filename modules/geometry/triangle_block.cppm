@@ -151,4 +151,21 @@ struct triangle_block_hits {
     return h;
 }
 
+// Lane `lane` of b against a SIMD ray (a packet): what intersect(ray, b.triangle_at(lane)) returns,
+// bit for bit. When the packet's lanes share one shear permutation (coherent packets), the
+// vertex components are read from the block in that order and broadcast, with no per-lane
+// selects; the lane's degenerate flag is the block's (`testable`).
+template <typename T>
+[[gnu::always_inline]] inline basic_hit_record<T> intersect_lane(prepared_ray<T> const& ray, triangle_block const& b,
+                                                                 int lane) {
+    if (!ray.shear.uniform) return intersect(ray, b.triangle_at(lane));
+    auto const l = std::size_t(lane);
+    constexpr auto stride = std::size_t(triangle_block_width);
+    auto const vertex = [&](std::size_t k) {
+        return uniformly_permuted(ray.shear, &b.vertex[k][0][l], stride, ray.permuted_origin);
+    };
+    return watertight_from_permuted(ray, ray.shear, vertex(0), vertex(1), vertex(2), b.prim_id[l], b.geom_id[l],
+                                    [&] { return (b.testable >> lane & 1u) == 0; });
+}
+
 } // namespace canopy
