@@ -347,3 +347,38 @@ TEST_CASE("with spatial splits, batch queries are bit-identical too, any hit inc
     for (auto const& r : rays) canopy::any_hit(r, &b, &b + 1, single);
     CHECK(batch.candidates == single.candidates);
 }
+
+TEST_CASE("packets down to one or two lanes continue as single rays with the single rays' results") {
+    // Below packet_lanes_alone_below lanes at a node, a packet with no intersector traces each lane
+    // from there alone. Packets whose lanes spread over the scene split early, at every level of
+    // instancing; packets with one or two rays taking part do so below the root.
+    static_assert(canopy::packet_lanes_alone_below >= 3, "the cases below would not reach lanes traced alone");
+    random_source rng(1407);
+    scenes const s(rng);
+    auto check = [&](canopy::aabb const& box, auto first, auto last) {
+        tally t;
+        // Groups of 8 from one origin whose directions share an octant but fan out widely.
+        auto const c = canopy::center(box);
+        float const extent = canopy::length(canopy::diagonal(box));
+        std::vector<ray> rays;
+        for (int g = 0; g < 120; ++g) {
+            vec3<float> const eye = c + vec3<float>(-0.7f, -0.6f, -1.0f) * extent + rng.point(-0.01f, 0.01f) * extent;
+            for (int k = 0; k < 8; ++k) {
+                vec3<float> const target = rng.point_in(box);
+                rays.push_back(make_ray(eye, canopy::max(target - eye, vec3<float>(1e-3f, 1e-3f, 1e-3f))));
+            }
+            // Some groups keep one or two rays taking part.
+            if (g % 3 == 1)
+                for (std::size_t k = 1; k < 8; ++k) rays[rays.size() - 8 + k].tmin = quiet_nan;
+            if (g % 3 == 2)
+                for (std::size_t k = 2; k < 8; ++k) rays[rays.size() - 8 + k].tmax = -1.0f;
+        }
+        compare(rays, first, last, canopy::default_intersector{}, t);
+        CHECK(t.mismatches == 0);
+        CHECK(t.packets == 2 * 80); // closest and any: the groups of 2 and of 8 rays taking part
+        CHECK(t.hits > 80);
+    };
+    check(s.mesh.bounds(), &s.mesh, &s.mesh + 1);
+    check(s.nested.top.bounds(), &s.nested.top, &s.nested.top + 1);
+    check(s.nested.middle.bounds(), s.nested.level1.begin(), s.nested.level1.end());
+}

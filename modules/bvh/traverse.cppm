@@ -43,6 +43,16 @@ import :protocol;
 
 export namespace canopy {
 
+// Packets whose lanes reaching a node or leaf are fewer than this trace it one lane at a time, as
+// scalar rays (Embree's hybrid traversal): a packet pays a whole packet's work per box and
+// triangle for the few lanes it carries, where a scalar ray tests 8 boxes or 8 triangles at once.
+// Only for intersectors that intercept nothing (see may_trace_lanes_alone); results are the same.
+inline constexpr int packet_lanes_alone_below = 3;
+
+} // namespace canopy
+
+export namespace canopy {
+
 // The arrays that traversal of a BVH reads: heap buffers, which stay where they are when the bvh
 // object moves (std::vector's move constructor keeps its buffer). Instances hold this instead of
 // the bvh's address, so that moving a BVH (a growing std::vector<bvh<...>>) leaves them valid.
@@ -465,21 +475,57 @@ template <typename T, typename Prim, typename I, typename Query>
     return false;
 }
 
+// Whether packets may trace lanes alone (packet_lanes_alone_below): packets of float rays, a
+// query that can hand out a lane and take its result back (canopy.query: lane, absorb), and an
+// intersector that intercepts nothing, so that no hook or filter could tell a lane traced alone
+// from a lane of the packet. Results are unchanged:
+// the lane's prepared ray is the one a single ray would have (prepared_lane), closest hits do not
+// depend on order, and any-hit traversal visits the subtree's leaves in the same order alone.
+template <typename T, typename I, typename Prim, typename Query>
+inline constexpr bool may_trace_lanes_alone = [] {
+    if constexpr (simd::simd_width_v<T> == 1 || !std::is_same_v<simd::scalar_type_t<T>, float> ||
+                  !requires(Query const& q) { q.lane(0); }) {
+        return false;
+    } else {
+        using Leaf = leaf_primitive_t<Prim>;
+        auto const intercepts = []<typename R>(R*) {
+            return primitive_hook_for<I, R, Leaf> || box_hook_for<I, R, aabb, vec3<ray_value_t<R>>> ||
+                   filter_hook_for<I, R>;
+        };
+        return !intercepts(static_cast<prepared_ray<float>*>(nullptr)) &&
+               !intercepts(static_cast<prepared_ray<T>*>(nullptr));
+    }
+}();
+
 } // namespace canopy::detail
 
 namespace canopy::detail {
 
-// The traversal loop with one node tester (see the top of this file).
+template <typename T, typename Prim, typename I, typename Query, typename S>
+bool traverse_lanes_alone(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect, Query& query,
+                          traversal_entry<S, std::uint32_t> const& from);
+
+// The traversal loop with one node tester (see the top of this file), from the root or from one
+// node or leaf (`from`, with a scalar ray: lanes of a packet traced alone).
 template <typename Tester, typename T, typename Prim, typename I, typename Query>
 [[gnu::always_inline]] inline bool traverse_with(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect,
-                                                 Query& query) {
+                                                 Query& query,
+                                                 traversal_entry<typename bvh<Prim>::value_type> from = {0, 0, 0, {}}) {
     using S = typename bvh<Prim>::value_type;
     using L = lanes_t<T>;
     Tester nodes(ray, isect);
     traversal_stack<S, L> stack;
-    traversal_entry<S, L> current{0, 0, S(0), {}};
+    traversal_entry<S, L> current{from.child, from.count, from.tnear, {}};
     if constexpr (!std::is_same_v<L, no_lanes>) current.lanes = (1u << simd::simd_width_v<T>) - 1u;
     for (;;) {
+        if constexpr (may_trace_lanes_alone<T, I, Prim, Query>) {
+            if (std::popcount(current.lanes) < packet_lanes_alone_below) {
+                if (traverse_lanes_alone(ray, b, isect, query, current)) return true;
+                nodes.tmax_changed();
+                if (!stack.pop_nearer_than(nodes.box_tmax(), current)) return false;
+                continue;
+            }
+        }
         if (current.count == 0) {
             auto const& node = b.wide_nodes[current.child];
             auto const hits = nodes.test(node, current.lanes);
@@ -507,24 +553,55 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
 
 } // namespace canopy::detail
 
+namespace canopy::detail {
+
+// The traversal of b from `from` (the root by default) with the node tester the ray allows.
+// Scalar float rays whose box test can take the fused form (canopy.geometry:box, slab_offsets)
+// run the loop built for it.
+template <typename T, typename Prim, typename I, typename Query>
+[[gnu::always_inline]] inline bool traverse_from(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect,
+                                                 Query& query,
+                                                 traversal_entry<typename bvh<Prim>::value_type> from = {0, 0, 0, {}}) {
+    using S = typename bvh<Prim>::value_type;
+    if constexpr (std::is_base_of_v<instance_path, Query>) ray.instances = &query;
+    if constexpr (uses_wide_box_test<T, S, I> && simd::native_fma) {
+        if (uses_fused_slabs(ray)) return traverse_with<node_tester<T, S, I, true>>(ray, b, isect, query, from);
+    } else if constexpr (uses_packet_box_test<T, S, I> && simd::native_fma) {
+        if (uses_fused_slabs(ray) && signs_agree(ray.inv_dir))
+            return traverse_with<node_tester<T, S, I, true>>(ray, b, isect, query, from);
+    }
+    return traverse_with<node_tester<T, S, I>>(ray, b, isect, query, from);
+}
+
+// The lanes of a packet that reach `from` (a node or a leaf), each traced from there on its own as
+// a scalar ray with a scalar query for that lane (may_trace_lanes_alone). True when the packet's
+// query is finished. Out of line: it runs for few packets, and inlined it would crowd the
+// packet loop's registers.
+template <typename T, typename Prim, typename I, typename Query, typename S>
+[[gnu::noinline]] bool traverse_lanes_alone(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect,
+                                            Query& query, traversal_entry<S, std::uint32_t> const& from) {
+    // Lanes that finished (any hit found) or left have tmax −inf: nothing to trace for them.
+    std::uint32_t const taking_part = simd::movemask(ray.tmin <= ray.tmax);
+    for (std::uint32_t lanes = from.lanes & taking_part; lanes != 0; lanes &= lanes - 1) {
+        int const k = std::countr_zero(lanes);
+        auto lane = prepared_lane(ray, k);
+        auto lane_query = query.lane(k);
+        traverse_from(lane, b, isect, lane_query, {from.child, from.count, from.tnear, {}});
+        if (query.absorb(k, lane_query, lane.tmax, ray)) return true;
+    }
+    return false;
+}
+
+} // namespace canopy::detail
+
 export namespace canopy {
 
 // Traverses b with a prepared ray; returns true when the query asked to stop (any-hit found,
-// packet finished). ray.tmax is tightened as the query allows. Scalar float rays whose box test
-// can take the fused form (canopy.geometry:box, slab_offsets) run the loop built for it.
+// packet finished). ray.tmax is tightened as the query allows.
 template <typename T, typename Prim, typename I, hit_collector<T> Query>
 [[gnu::always_inline]] inline bool traverse(prepared_ray<T>& ray, bvh_storage<Prim> const& b, I& isect, Query& query) {
-    using S = typename bvh<Prim>::value_type;
     if (b.empty()) return false;
-    if constexpr (std::is_base_of_v<instance_path, Query>) ray.instances = &query;
-    if constexpr (detail::uses_wide_box_test<T, S, I> && simd::native_fma) {
-        if (uses_fused_slabs(ray))
-            return detail::traverse_with<detail::node_tester<T, S, I, true>>(ray, b, isect, query);
-    } else if constexpr (detail::uses_packet_box_test<T, S, I> && simd::native_fma) {
-        if (uses_fused_slabs(ray) && detail::signs_agree(ray.inv_dir))
-            return detail::traverse_with<detail::node_tester<T, S, I, true>>(ray, b, isect, query);
-    }
-    return detail::traverse_with<detail::node_tester<T, S, I>>(ray, b, isect, query);
+    return detail::traverse_from(ray, b, isect, query);
 }
 
 // Traverses b with a plain ray (prepared here, once; the triangle shear waits for the first leaf);

@@ -7,6 +7,7 @@ module;
 #pragma STDC FP_CONTRACT OFF
 #include <array>
 #include <canopy/check.hpp>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <type_traits>
@@ -107,6 +108,33 @@ template <typename T>
         hr.prim_id = simd::select(hit, index_t(std::int32_t(prim_id)), hr.prim_id);
         hr.geom_id = simd::select(hit, index_t(std::int32_t(geom_id)), hr.geom_id);
     }
+}
+
+// Lane k of a packet's record as the record of a scalar ray, and back.
+template <typename T>
+basic_hit_record<simd::scalar_type_t<T>> record_lane(basic_hit_record<T> const& p, int k) {
+    basic_hit_record<simd::scalar_type_t<T>> r;
+    r.hit = p.hit[k];
+    r.t = p.t[k];
+    r.u = p.u[k];
+    r.v = p.v[k];
+    r.prim_id = std::uint32_t(p.prim_id[k]);
+    r.geom_id = std::uint32_t(p.geom_id[k]);
+    r.inst_id = std::uint32_t(p.inst_id[k]);
+    for (std::size_t d = 0; d < r.inner_inst_id.size(); ++d) r.inner_inst_id[d] = std::uint32_t(p.inner_inst_id[d][k]);
+    return r;
+}
+
+template <typename T>
+void set_record_lane(basic_hit_record<T>& p, int k, basic_hit_record<simd::scalar_type_t<T>> const& r) {
+    p.hit.set(k, r.hit);
+    p.t.set(k, r.t);
+    p.u.set(k, r.u);
+    p.v.set(k, r.v);
+    p.prim_id.set(k, std::int32_t(r.prim_id));
+    p.geom_id.set(k, std::int32_t(r.geom_id));
+    p.inst_id.set(k, std::int32_t(r.inst_id));
+    for (std::size_t d = 0; d < r.inner_inst_id.size(); ++d) p.inner_inst_id[d].set(k, std::int32_t(r.inner_inst_id[d]));
 }
 
 // Lane-wise choice between two records: m ? a : b.

@@ -169,6 +169,25 @@ struct prepared_ray : basic_ray<T> {
     instance_path const* instances = nullptr;
 };
 
+// Lane k of a prepared packet as a prepared scalar ray: the same ray and box-test constants, bit
+// for bit, as preparing that lane's ray on its own would give (they are computed lane by lane).
+// The shear is left to be prepared at the first leaf, as for any prepared ray.
+template <typename T>
+prepared_ray<simd::scalar_type_t<T>> prepared_lane(prepared_ray<T> const& ray, int k) {
+    prepared_ray<simd::scalar_type_t<T>> r;
+    r.origin = get_lane(ray.origin, k);
+    r.direction = get_lane(ray.direction, k);
+    r.tmin = ray.tmin[k];
+    r.tmax = ray.tmax[k];
+    r.inv_dir = get_lane(ray.inv_dir, k);
+    r.near_origin = get_lane(ray.near_origin, k);
+    r.far_origin = get_lane(ray.far_origin, k);
+    r.slabs.near_offset = get_lane(ray.slabs.near_offset, k);
+    r.slabs.far_offset = get_lane(ray.slabs.far_offset, k);
+    r.slabs.usable = ray.slabs.usable[k];
+    return r;
+}
+
 template <typename Ray>
 inline constexpr bool is_prepared_ray_v = false;
 template <typename T>

@@ -141,19 +141,6 @@ inline batch_packet pack_group(std::span<ray const> group) {
     return p;
 }
 
-inline basic_hit_record<float> lane_record(basic_hit_record<simd::float8> const& p, int k) {
-    basic_hit_record<float> r;
-    r.hit = p.hit[k];
-    r.t = p.t[k];
-    r.u = p.u[k];
-    r.v = p.v[k];
-    r.prim_id = std::uint32_t(p.prim_id[k]);
-    r.geom_id = std::uint32_t(p.geom_id[k]);
-    r.inst_id = std::uint32_t(p.inst_id[k]);
-    for (std::size_t d = 0; d < r.inner_inst_id.size(); ++d) r.inner_inst_id[d] = std::uint32_t(p.inner_inst_id[d][k]);
-    return r;
-}
-
 inline void check_batch_sizes(std::size_t rays, std::size_t results) {
     if (results < rays) throw std::invalid_argument("canopy: a batch query needs one result per ray");
 }
@@ -200,7 +187,7 @@ batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<
         rays, first, last,
         [&](std::size_t i, auto const& p) {
             auto const hr = closest_hit(p, first, last, isect);
-            for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = detail::lane_record(hr, k);
+            for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = record_lane(hr, k);
         },
         [&](std::size_t i) { out[i] = closest_hit(rays[i], first, last, isect); });
 }
@@ -214,7 +201,7 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basi
         rays, first, last,
         [&](std::size_t i, auto const& p) {
             auto const hr = any_hit(p, first, last, isect);
-            for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = detail::lane_record(hr, k);
+            for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = record_lane(hr, k);
         },
         [&](std::size_t i) { out[i] = any_hit(rays[i], first, last, isect); });
 }

@@ -71,6 +71,25 @@ struct closest_query : instance_path {
         ray.tmax = simd::select(accept, hr.t, ray.tmax);
         return false;
     }
+
+    // Packets: lane k on its own (canopy.bvh:instance, lanes traced alone), as a scalar query
+    // with the lane's best hit and this query's instance path; absorb takes its result back.
+    closest_query<simd::scalar_type_t<T>> lane(int k) const
+        requires(simd::simd_width_v<T> > 1)
+    {
+        closest_query<simd::scalar_type_t<T>> q;
+        static_cast<instance_path&>(q) = *this;
+        q.best = record_lane(best, k);
+        return q;
+    }
+    template <typename Ray>
+    bool absorb(int k, closest_query<simd::scalar_type_t<T>> const& q, simd::scalar_type_t<T> lane_tmax, Ray& ray)
+        requires(simd::simd_width_v<T> > 1)
+    {
+        set_record_lane(best, k, q.best);
+        ray.tmax.set(k, lane_tmax);
+        return false;
+    }
 };
 
 template <typename T>
@@ -94,6 +113,25 @@ struct any_query : instance_path {
             ray.tmax = simd::select(done, T(-std::numeric_limits<simd::scalar_type_t<T>>::infinity()), ray.tmax);
             return simd::all(done);
         }
+    }
+
+    // Packets: lane k on its own (see closest_query::lane). A lane traced alone is not done.
+    any_query<simd::scalar_type_t<T>> lane(int) const
+        requires(simd::simd_width_v<T> > 1)
+    {
+        any_query<simd::scalar_type_t<T>> q;
+        static_cast<instance_path&>(q) = *this;
+        return q;
+    }
+    template <typename Ray>
+    bool absorb(int k, any_query<simd::scalar_type_t<T>> const& q, simd::scalar_type_t<T>, Ray& ray)
+        requires(simd::simd_width_v<T> > 1)
+    {
+        if (!q.found.hit) return false;
+        set_record_lane(found, k, q.found);
+        done.set(k, true);
+        ray.tmax.set(k, -std::numeric_limits<simd::scalar_type_t<T>>::infinity());
+        return simd::all(done);
     }
 };
 
