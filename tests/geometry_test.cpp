@@ -521,6 +521,23 @@ std::array<ray, 8> random_rays_for(random_source& rng, triangle const& tri) {
     return rays;
 }
 
+// The triangles of one block (case i): a random number of used lanes, some triangles degenerate
+// (a repeated vertex, or three collinear vertices), some sharing vertices with the previous one.
+std::vector<triangle> random_block_triangles(random_source& rng, int i) {
+    int const used = rng.integer(1, canopy::triangle_block_width);
+    std::vector<triangle> tris;
+    for (int lane = 0; lane < used; ++lane) {
+        triangle t = random_triangle(rng, 5.0f, 2.0f);
+        if (lane > 0 && rng.integer(0, 3) == 0) t.v0 = tris.back().v1, t.v1 = tris.back().v0;
+        if (rng.integer(0, 9) == 0) t.v2 = t.v0;
+        if (rng.integer(0, 9) == 0) t.v2 = t.v0 + (t.v1 - t.v0) * 2.0f;
+        t.prim_id = std::uint32_t(10 * i + lane);
+        t.geom_id = std::uint32_t(lane);
+        tris.push_back(t);
+    }
+    return tris;
+}
+
 } // namespace
 
 TEST_CASE("packet (float8) triangle and sphere tests equal the scalar tests lane by lane, bit for bit") {
@@ -795,19 +812,8 @@ TEST_CASE("primitive bounds hold the primitive") {
 TEST_CASE("a block of triangles gives, lane by lane, the one-triangle watertight result bit for bit") {
     random_source rng(21);
     for (int i = 0; i < 2000; ++i) {
-        // A block with a random number of used lanes, some triangles degenerate (a repeated
-        // vertex, or three collinear vertices), some sharing vertices with the previous one.
-        int const used = rng.integer(1, canopy::triangle_block_width);
-        std::vector<triangle> tris;
-        for (int lane = 0; lane < used; ++lane) {
-            triangle t = random_triangle(rng, 5.0f, 2.0f);
-            if (lane > 0 && rng.integer(0, 3) == 0) t.v0 = tris.back().v1, t.v1 = tris.back().v0;
-            if (rng.integer(0, 9) == 0) t.v2 = t.v0;
-            if (rng.integer(0, 9) == 0) t.v2 = t.v0 + (t.v1 - t.v0) * 2.0f;
-            t.prim_id = std::uint32_t(10 * i + lane);
-            t.geom_id = std::uint32_t(lane);
-            tris.push_back(t);
-        }
+        std::vector<triangle> const tris = random_block_triangles(rng, i);
+        int const used = int(tris.size());
         std::vector<canopy::triangle_block> blocks;
         canopy::append_triangle_blocks(blocks, tris.begin(), tris.end());
         REQUIRE(blocks.size() == 1);
@@ -843,15 +849,8 @@ TEST_CASE("packets whose lanes share one shear permutation test triangles and bl
     random_source rng(33);
     int uniform_packets = 0, mixed_packets = 0;
     for (int i = 0; i < 2000; ++i) {
-        std::vector<triangle> tris;
-        int const used = rng.integer(1, canopy::triangle_block_width);
-        for (int lane = 0; lane < used; ++lane) {
-            triangle t = random_triangle(rng, 5.0f, 2.0f);
-            if (rng.integer(0, 9) == 0) t.v2 = t.v0; // degenerate
-            t.prim_id = std::uint32_t(10 * i + lane);
-            t.geom_id = std::uint32_t(lane);
-            tris.push_back(t);
-        }
+        std::vector<triangle> const tris = random_block_triangles(rng, i);
+        int const used = int(tris.size());
         std::vector<canopy::triangle_block> blocks;
         canopy::append_triangle_blocks(blocks, tris.begin(), tris.end());
         REQUIRE(blocks.size() == 1);
