@@ -12,6 +12,7 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <utility>
 #include <vector>
 
 import canopy.geometry;
@@ -521,9 +522,10 @@ std::array<ray, 8> random_rays_for(random_source& rng, triangle const& tri) {
     return rays;
 }
 
-// The triangles of one block (case i): a random number of used lanes, some triangles degenerate
-// (a repeated vertex, or three collinear vertices), some sharing vertices with the previous one.
-std::vector<triangle> random_block_triangles(random_source& rng, int i) {
+// The triangles of one block (case i), and the block: a random number of used lanes, some
+// triangles degenerate (a repeated vertex, or three collinear vertices), some sharing vertices
+// with the previous one.
+std::pair<std::vector<triangle>, canopy::triangle_block> random_block(random_source& rng, int i) {
     int const used = rng.integer(1, canopy::triangle_block_width);
     std::vector<triangle> tris;
     for (int lane = 0; lane < used; ++lane) {
@@ -535,7 +537,10 @@ std::vector<triangle> random_block_triangles(random_source& rng, int i) {
         t.geom_id = std::uint32_t(lane);
         tris.push_back(t);
     }
-    return tris;
+    std::vector<canopy::triangle_block> blocks;
+    canopy::append_triangle_blocks(blocks, tris.begin(), tris.end());
+    REQUIRE(blocks.size() == 1);
+    return {tris, blocks[0]};
 }
 
 } // namespace
@@ -812,12 +817,8 @@ TEST_CASE("primitive bounds hold the primitive") {
 TEST_CASE("a block of triangles gives, lane by lane, the one-triangle watertight result bit for bit") {
     random_source rng(21);
     for (int i = 0; i < 2000; ++i) {
-        std::vector<triangle> const tris = random_block_triangles(rng, i);
+        auto const [tris, block] = random_block(rng, i);
         int const used = int(tris.size());
-        std::vector<canopy::triangle_block> blocks;
-        canopy::append_triangle_blocks(blocks, tris.begin(), tris.end());
-        REQUIRE(blocks.size() == 1);
-        auto const& block = blocks[0];
         for (auto const& r : random_rays_for(rng, tris[std::size_t(rng.integer(0, used - 1))])) {
             canopy::prepared_ray<float> const prepared(r);
             auto const hits = canopy::intersect_block(prepared, block);
@@ -849,11 +850,8 @@ TEST_CASE("packets whose lanes share one shear permutation test triangles and bl
     random_source rng(33);
     int uniform_packets = 0, mixed_packets = 0;
     for (int i = 0; i < 2000; ++i) {
-        std::vector<triangle> const tris = random_block_triangles(rng, i);
+        auto const [tris, block] = random_block(rng, i);
         int const used = int(tris.size());
-        std::vector<canopy::triangle_block> blocks;
-        canopy::append_triangle_blocks(blocks, tris.begin(), tris.end());
-        REQUIRE(blocks.size() == 1);
         auto const& target = tris[std::size_t(rng.integer(0, used - 1))];
 
         // Every other case: a coherent packet (one dominant axis and sign: |d[axis]| ≥ 1 > the
@@ -881,7 +879,7 @@ TEST_CASE("packets whose lanes share one shear permutation test triangles and bl
         for (int t = 0; t < used; ++t) {
             auto const& tri = tris[std::size_t(t)];
             auto const whole = intersect(packet, tri);
-            auto const from_block = canopy::intersect_lane(packet, blocks[0], t);
+            auto const from_block = canopy::intersect_lane(packet, block, t);
             for (int lane = 0; lane < 8; ++lane) {
                 INFO("case " << i << ", triangle " << t << (packet.shear.uniform ? ", uniform" : ", mixed"));
                 auto const one = intersect(rays[std::size_t(lane)], tri);
