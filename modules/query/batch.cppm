@@ -17,6 +17,12 @@
 //   neighbouring pixels: close origins).
 // The test reads the 8 rays once: it costs far less than tracing them.
 //
+// How a packet is traced (canopy.bvh:traverse): its node test takes one child box at a time
+// against all lanes; its leaf test one triangle at a time, read straight from the leaf's block,
+// with the vertex components picked once for all lanes when they share one shear permutation
+// (canopy.geometry:triangle_block, intersect_lane); and with no hook or filter, lanes that reach
+// a node or leaf fewer than packet_lanes_alone_below at a time go on from there as scalar rays.
+//
 // Guarantees:
 // - Results are bit-identical to the single-ray queries (hit, t, u, v, prim_id, geom_id, inst_id,
 //   inner_inst_id): a packet tests each lane with the single ray's arithmetic, its box tests are
