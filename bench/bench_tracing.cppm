@@ -73,10 +73,15 @@ batch_stats canopy_trace_batch(canopy_scene const& s, std::span<ray const> rays,
 }
 
 template <typename Isect>
-bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect& isect) {
-    basic_hit_record<float> const hr = s.scene.visit_root([&](auto const& root) {
+basic_hit_record<float> canopy_trace_record(canopy_scene const& s, ray const& r, bool closest, Isect& isect) {
+    return s.scene.visit_root([&](auto const& root) {
         return closest ? closest_hit(r, &root, &root + 1, isect) : any_hit(r, &root, &root + 1, isect);
     });
+}
+
+template <typename Isect>
+bench_hit canopy_trace(canopy_scene const& s, ray const& r, bool closest, Isect& isect) {
+    basic_hit_record<float> const hr = canopy_trace_record(s, r, closest, isect);
     if (!hr.hit) return {};
     return {hr.t, hr.prim_id, hr.inst_id, hr.u, hr.v};
 }

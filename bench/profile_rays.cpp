@@ -27,18 +27,22 @@ namespace {
 
 using namespace canopy::bench;
 
+// Both ways write every ray's hit record into `out`, allocated once by the caller: a batch query
+// must write its results, and a fresh 10 MB buffer per pass would time page faults.
 template <typename Isect>
 [[gnu::noinline]] std::size_t trace_rays(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest,
-                                         Isect& isect) {
+                                         Isect& isect, std::vector<canopy::basic_hit_record<float>>& out) {
     std::size_t hits = 0;
-    for (auto const& r : rays) hits += canopy_trace(s, r, closest, isect).prim != canopy::invalid_id;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        out[i] = canopy_trace_record(s, rays[i], closest, isect);
+        hits += out[i].hit;
+    }
     return hits;
 }
 
 template <typename Isect>
 [[gnu::noinline]] std::size_t trace_batch(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest,
-                                          Isect& isect) {
-    std::vector<canopy::basic_hit_record<float>> out(rays.size());
+                                          Isect& isect, std::vector<canopy::basic_hit_record<float>>& out) {
     canopy_trace_batch(s, rays, closest, isect, out);
     return std::size_t(std::count_if(out.begin(), out.end(), [](auto const& hr) { return bool(hr.hit); }));
 }
@@ -54,9 +58,10 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
     Isect isect;
     std::size_t hits = 0;
     double seconds = 1e30;
+    std::vector<canopy::basic_hit_record<float>> records(rays.size());
     for (int p = 0; p < passes; ++p) {
         auto const start = std::chrono::steady_clock::now();
-        hits = batch ? trace_batch(s, rays, closest, isect) : trace_rays(s, rays, closest, isect);
+        hits = batch ? trace_batch(s, rays, closest, isect, records) : trace_rays(s, rays, closest, isect, records);
         seconds = std::min(seconds, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     }
     counting_intersector<Isect> counter;
