@@ -202,11 +202,12 @@ template <typename Ray, typename Prim, typename I, typename Query>
 
 // The first `count` triangles of a leaf block. A triangle hook of the intersector sees them one
 // at a time, exactly as given (triangle_at), as the paper's API promises. Otherwise packets test
-// them one at a time, read from the block (intersect_lane); for scalar rays the block's triangles are tested at once (intersect_block: bit-identical lane by lane;
-// degenerate triangles are known from the block and never tested) and the hit lanes go to the
-// filter and the query: in lane order for queries that stop at any hit (the first hit in leaf
-// order, as one at a time would find), by increasing (t, prim_id) otherwise, each while its t is
-// still within the ray's tightening tmax.
+// them one at a time, read from the block (intersect_lane); for scalar rays the block's triangles
+// are tested at once (intersect_block: bit-identical lane by lane; degenerate triangles are known
+// from the block and never tested) and the hit lanes go to the filter and the query: in lane
+// order for queries that stop at any hit (the first hit in leaf order, as one at a time would
+// find), by increasing (t, prim_id) otherwise, each while its t is still within the ray's
+// tightening tmax.
 template <typename Ray, typename I, typename Query>
 [[gnu::always_inline]] inline bool call_hooks_or_descend(Ray& ray, triangle_block const& block, int count, I& isect,
                                                          Query& query) {

@@ -49,10 +49,6 @@ export namespace canopy {
 // Only for intersectors that intercept nothing (see may_trace_lanes_alone); results are the same.
 inline constexpr int packet_lanes_alone_below = 3;
 
-} // namespace canopy
-
-export namespace canopy {
-
 // The arrays that traversal of a BVH reads: heap buffers, which stay where they are when the bvh
 // object moves (std::vector's move constructor keeps its buffer). Instances hold this instead of
 // the bvh's address, so that moving a BVH (a growing std::vector<bvh<...>>) leaves them valid.
@@ -478,9 +474,9 @@ template <typename T, typename Prim, typename I, typename Query>
 // Whether packets may trace lanes alone (packet_lanes_alone_below): packets of float rays, a
 // query that can hand out a lane and take its result back (canopy.query: lane, absorb), and an
 // intersector that intercepts nothing, so that no hook or filter could tell a lane traced alone
-// from a lane of the packet. Results are unchanged:
-// the lane's prepared ray is the one a single ray would have (prepared_lane), closest hits do not
-// depend on order, and any-hit traversal visits the subtree's leaves in the same order alone.
+// from a lane of the packet. Results are unchanged: the lane's prepared ray is the one a single
+// ray would have (prepared_lane), closest hits do not depend on order, and any-hit traversal
+// visits the subtree's leaves in the same order alone.
 template <typename T, typename I, typename Prim, typename Query>
 inline constexpr bool may_trace_lanes_alone = [] {
     if constexpr (simd::simd_width_v<T> == 1 || !std::is_same_v<simd::scalar_type_t<T>, float> ||
