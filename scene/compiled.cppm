@@ -22,6 +22,7 @@ module;
 #include <cstdint>
 #include <cstdio>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -209,6 +210,18 @@ struct compiled_scene {
         return visit_root([&](auto const& root) { return canopy::any_hit(r, &root, &root + 1, isect); });
     }
 
+    // The batch queries (canopy.query:batch): out[i] as closest_hit(rays[i], isect) and
+    // any_hit(rays[i], isect).hit would give, bit for bit; coherent runs of rays traced as packets.
+    template <typename I>
+    inline batch_stats closest_hit(std::span<ray const> rays, std::span<basic_hit_record<float>> out, I& isect) const {
+        return visit_root([&](auto const& root) { return canopy::closest_hit(rays, &root, &root + 1, out, isect); });
+    }
+
+    template <typename I>
+    inline batch_stats any_hit(std::span<ray const> rays, std::span<bool> out, I& isect) const {
+        return visit_root([&](auto const& root) { return canopy::any_hit(rays, &root, &root + 1, out, isect); });
+    }
+
     // The user id of the instance a hit lies in: the innermost placement made by an instance node
     // (invalid_id when no instance node placed it).
     std::uint32_t instance_id(basic_hit_record<float> const& hr) const {
@@ -357,14 +370,37 @@ private:
     }
 };
 
+} // namespace canopy
+
+namespace canopy::detail {
+
+// A filter's answer for a scalar record (keep(hr)) or a packet's (keep(lane) for every hit lane,
+// false for the others), keep taking a scalar record: the alpha masks below serve both.
+template <typename T, typename Keep>
+simd::mask_type_t<T> keep_lanes(basic_hit_record<T> const& hr, Keep const& keep) {
+    if constexpr (simd::simd_width_v<T> == 1) {
+        return keep(hr);
+    } else {
+        simd::mask_type_t<T> kept;
+        for (int k = 0; k < simd::simd_width_v<T>; ++k)
+            if (hr.hit[k]) kept.set(k, keep(record_lane(hr, k)));
+        return kept;
+    }
+}
+
+} // namespace canopy::detail
+
+export namespace canopy {
+
 // The paper's texture alpha mask: a candidate on a masked material is kept only where the
 // texture's alpha at the hit's texture coordinates reaches the cutoff. Written as a filter
 // (canopy.intersector), so that leaves keep their SIMD test; `keeps` serves intersectors that
 // compose it with hooks of their own.
 struct texture_alpha_mask : basic_intersector<texture_alpha_mask> {
-    template <typename Ray>
-    bool filter(Ray const&, basic_hit_record<float> const& hr) const {
-        return keeps(hr);
+    // For scalar rays and packets (lane by lane, the candidate lanes only).
+    template <typename Ray, typename T>
+    simd::mask_type_t<T> filter(Ray const&, basic_hit_record<T> const& hr) const {
+        return detail::keep_lanes(hr, [&](basic_hit_record<float> const& lane) { return keeps(lane); });
     }
 
     inline bool keeps(basic_hit_record<float> const& hr) const {
@@ -379,9 +415,12 @@ struct texture_alpha_mask : basic_intersector<texture_alpha_mask> {
 // A procedural alpha mask on masked materials: concentric rings around the centre of texture
 // space, cut off outside the unit disc. A filter, as above.
 struct procedural_alpha_mask : basic_intersector<procedural_alpha_mask> {
-    template <typename Ray>
-    bool filter(Ray const&, basic_hit_record<float> const& hr) const {
-        return scene->material_of(hr).alpha != alpha_mode::mask || keeps(scene->uv(hr));
+    // For scalar rays and packets (lane by lane, the candidate lanes only).
+    template <typename Ray, typename T>
+    simd::mask_type_t<T> filter(Ray const&, basic_hit_record<T> const& hr) const {
+        return detail::keep_lanes(hr, [&](basic_hit_record<float> const& lane) {
+            return scene->material_of(lane).alpha != alpha_mode::mask || keeps(scene->uv(lane));
+        });
     }
 
     // The rule: with d = 2·|uv − (0.5, 0.5)|, keep where d < 1 and frac(5d) < 0.6.

@@ -5,12 +5,15 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -490,6 +493,238 @@ TEST_CASE("images are identical for 1 and 2 threads, across runs and tile sizes"
         int distinct = 0;
         for (std::size_t i = 1; i < one.pixels.size(); ++i) distinct += one.pixels[i].x != one.pixels[i - 1].x;
         CHECK(distinct > int(one.pixels.size()) / 10);
+    }
+}
+
+// ---- waves: the kernels over a tile's samples, traced in batches -------------------------
+
+namespace {
+
+// A compiled scene that counts the rays traced through it, one at a time or in batches, and the
+// packets the batches made.
+struct counted_scene {
+    canopy::compiled_scene const* scene;
+    std::atomic<std::uint64_t>* rays;
+    std::atomic<std::uint64_t>* packets;
+
+    template <typename I>
+    canopy::basic_hit_record<float> closest_hit(canopy::ray const& r, I& isect) const {
+        ++*rays;
+        return scene->closest_hit(r, isect);
+    }
+    template <typename I>
+    canopy::basic_hit_record<float> any_hit(canopy::ray const& r, I& isect) const {
+        ++*rays;
+        return scene->any_hit(r, isect);
+    }
+    template <typename I>
+    void closest_hit(std::span<canopy::ray const> rs, std::span<canopy::basic_hit_record<float>> out, I& isect) const {
+        *rays += rs.size();
+        *packets += scene->closest_hit(rs, out, isect).packets;
+    }
+    template <typename I>
+    void any_hit(std::span<canopy::ray const> rs, std::span<bool> out, I& isect) const {
+        *rays += rs.size();
+        *packets += scene->any_hit(rs, out, isect).packets;
+    }
+    canopy::surface_sample surface(canopy::basic_hit_record<float> const& hr, canopy::ray const& r) const {
+        return scene->surface(hr, r);
+    }
+    vec3<float> background(canopy::ray const& r) const { return scene->background(r); }
+};
+
+// The paper's form of an alpha rule (a triangle hook that calls the library's test), serving
+// scalar rays and packets: holes where u < 0.3.
+struct hook_rule : canopy::basic_intersector<hook_rule> {
+    using canopy::basic_intersector<hook_rule>::operator();
+    template <typename Ray>
+    auto operator()(Ray const& ray, canopy::triangle const& tri) const {
+        auto hr = intersect(ray, tri);
+        hr.hit &= hr.u >= 0.3f;
+        return hr;
+    }
+};
+
+// A filter declared for scalar records only: batches trace every ray on its own with it.
+struct scalar_rule : canopy::basic_intersector<scalar_rule> {
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) const {
+        return hr.u >= 0.3f;
+    }
+};
+
+constexpr int wave_width = 61, wave_height = 45, wave_tile = 7, wave_spp = 2;
+
+struct wave_render {
+    canopy::framebuffer image;
+    std::uint64_t rays = 0, packets = 0;
+};
+
+// Every pixel's wave_spp jittered samples through kernel(scene, ray, isect, rng), one sample at a
+// time, each with its own copy of the intersector.
+template <typename I, typename Kernel>
+wave_render render_per_sample(canopy::compiled_scene const& scene, canopy::pinhole_camera const& camera,
+                              I const& prototype, Kernel const& kernel) {
+    std::atomic<std::uint64_t> rays{0}, packets{0};
+    counted_scene const counted{&scene, &rays, &packets};
+    wave_render out{canopy::framebuffer(wave_width, wave_height)};
+    canopy::render_tiles(out.image, [&](int x, int y) {
+        vec4<float> sum;
+        for (int s = 0; s < wave_spp; ++s) {
+            canopy::pixel_random rng(5u, x, y, s);
+            float const jx = rng.next(), jy = rng.next();
+            I isect = prototype;
+            sum = sum + kernel(counted, camera.primary_ray(float(x) + jx, float(y) + jy, wave_width, wave_height),
+                               isect, rng);
+        }
+        return sum * (1.0f / float(wave_spp));
+    }, {.tile_size = wave_tile, .progress = {}});
+    out.rays = rays;
+    return out;
+}
+
+// The same samples, a tile's pixels at a time through wave(scene, rays, rngs, isect, colours).
+template <typename I, typename Wave>
+wave_render render_by_waves(canopy::compiled_scene const& scene, canopy::pinhole_camera const& camera,
+                            I const& prototype, Wave const& wave) {
+    std::atomic<std::uint64_t> rays{0}, packets{0};
+    counted_scene const counted{&scene, &rays, &packets};
+    wave_render out{canopy::framebuffer(wave_width, wave_height)};
+    canopy::tile_shader const shade = [&](canopy::tile_grid::rect const& r, std::span<vec4<float>> pixels) {
+        std::vector<canopy::ray> rs;
+        std::vector<canopy::pixel_random> rngs;
+        std::vector<vec4<float>> colours(pixels.size());
+        for (auto& p : pixels) p = vec4<float>();
+        for (int s = 0; s < wave_spp; ++s) {
+            rs.clear();
+            rngs.clear();
+            for (int y = r.y0; y < r.y1; ++y)
+                for (int x = r.x0; x < r.x1; ++x) {
+                    canopy::pixel_random& rng = rngs.emplace_back(5u, x, y, s);
+                    float const jx = rng.next(), jy = rng.next();
+                    rs.push_back(camera.primary_ray(float(x) + jx, float(y) + jy, wave_width, wave_height));
+                }
+            I isect = prototype;
+            wave(counted, std::span<canopy::ray const>(rs), std::span(rngs), isect, std::span(colours));
+            for (std::size_t k = 0; k < pixels.size(); ++k) pixels[k] = pixels[k] + colours[k];
+        }
+        for (auto& p : pixels) p = p * (1.0f / float(wave_spp));
+    };
+    canopy::render_tiles(out.image, shade, {.tile_size = wave_tile, .progress = {}});
+    out.rays = rays;
+    out.packets = packets;
+    return out;
+}
+
+// Pixels whose four floats differ in any bit (NaN payloads and the sign of zero included).
+int differing_bits(canopy::framebuffer const& a, canopy::framebuffer const& b) {
+    int n = 0;
+    for (std::size_t i = 0; i < a.pixels.size(); ++i)
+        n += std::memcmp(&a.pixels[i], &b.pixels[i], sizeof(vec4<float>)) != 0;
+    return n;
+}
+
+// Renders scene both ways with every kernel and the intersector prototype, and compares.
+template <typename I>
+void check_waves(canopy::compiled_scene const& scene, canopy::pinhole_camera const& camera, I const& prototype,
+                 bool expect_packets) {
+    canopy::light_options light;
+    light.sun_direction = canopy::normalize(vec3<float>(0.6f, 0.8f, 0.7f));
+    float const diagonal = canopy::length(canopy::diagonal(scene.bounds()));
+    canopy::ao_options const ao{.samples = 5, .radius = 0.2f * diagonal};
+    canopy::path_options path{.bounces = 2, .light = light};
+    path.light.point_light = true;
+    path.light.point_position = canopy::center(scene.bounds()) + vec3<float>(0.0f, 0.5f * diagonal, 0.0f);
+    path.light.point_intensity = vec3<float>(diagonal * diagonal);
+
+    auto const compare = [&](char const* name, wave_render const& single, wave_render const& waves) {
+        INFO("kernel " << name);
+        CHECK(differing_bits(single.image, waves.image) == 0);
+        CHECK(single.rays == waves.rays);
+        CHECK((waves.packets > 0) == expect_packets);
+        // Not a blank image.
+        int distinct = 0;
+        for (std::size_t i = 1; i < single.image.pixels.size(); ++i)
+            distinct += single.image.pixels[i].x != single.image.pixels[i - 1].x;
+        CHECK(distinct > 20);
+    };
+    compare("primary",
+            render_per_sample(scene, camera, prototype, [&](auto const& s, canopy::ray const& r, I& isect, auto&) {
+                return canopy::primary_kernel(s, r, isect, light);
+            }),
+            render_by_waves(scene, camera, prototype, [&](auto const& s, auto rs, auto, I& isect, auto colours) {
+                canopy::primary_wave(s, rs, isect, colours, light);
+            }));
+    compare("ao",
+            render_per_sample(scene, camera, prototype, [&](auto const& s, canopy::ray const& r, I& isect, auto& rng) {
+                return canopy::ao_kernel(s, r, isect, rng, ao);
+            }),
+            render_by_waves(scene, camera, prototype, [&](auto const& s, auto rs, auto rngs, I& isect, auto colours) {
+                canopy::ao_wave(s, rs, rngs, isect, colours, ao);
+            }));
+    compare("path",
+            render_per_sample(scene, camera, prototype, [&](auto const& s, canopy::ray const& r, I& isect, auto& rng) {
+                return canopy::path_kernel(s, r, isect, rng, path);
+            }),
+            render_by_waves(scene, camera, prototype, [&](auto const& s, auto rs, auto rngs, I& isect, auto colours) {
+                canopy::path_wave(s, rs, rngs, isect, colours, path);
+            }));
+}
+
+} // namespace
+
+TEST_CASE("the waves render the per-sample kernels' images bit for bit, tracing the same rays") {
+    // 61 × 45 pixels in 7-pixel tiles (narrow last row and column: waves of 7 × 3, 5 × 7, 5 × 3
+    // rays beside full 49-ray tiles), two jittered samples, every kernel, with the point light.
+    auto const forest = small_forest();
+    auto const forest_view = forest.render_camera(float(wave_width) / float(wave_height));
+    canopy::texture_alpha_mask texture_mask;
+    texture_mask.scene = &forest;
+    canopy::procedural_alpha_mask rings;
+    rings.scene = &forest;
+    SECTION("the forest (two instance levels), no intersector") {
+        check_waves(forest, forest_view, canopy::default_intersector{}, true);
+    }
+    SECTION("the forest, the texture alpha mask (a filter, lane by lane for packets)") {
+        check_waves(forest, forest_view, texture_mask, true);
+    }
+    SECTION("the forest, the procedural mask") { check_waves(forest, forest_view, rings, true); }
+    SECTION("the forest, a triangle hook in the paper's form") { check_waves(forest, forest_view, hook_rule{}, true); }
+    SECTION("the layered quads, the texture mask") {
+        auto const layered = make_layered_scene(front_kind::textured);
+        canopy::texture_alpha_mask mask;
+        mask.scene = &layered;
+        auto const camera = canopy::pinhole_camera::look_at({0.3f, -0.2f, 4.0f}, {0.0f, 0.0f, 0.0f},
+                                                            {0.0f, 1.0f, 0.0f}, 60.0f,
+                                                            float(wave_width) / float(wave_height));
+        check_waves(layered, camera, mask, true);
+    }
+    SECTION("a scalar-only intersector: the waves trace one ray at a time, same image") {
+        check_waves(forest, forest_view, scalar_rule{}, false);
+    }
+}
+
+TEST_CASE("render_tiles with a tile shader gives the per-pixel image, whatever the tile size") {
+    auto const forest = small_forest();
+    auto const camera = forest_camera(forest);
+    auto const shade = [&](int x, int y) { return canopy::primary_kernel(forest, pixel_ray(camera, x, y, width, height), canopy::default_intersector{}); };
+    canopy::framebuffer per_pixel(width, height);
+    canopy::render_tiles(per_pixel, shade, {.tile_size = 16, .progress = {}});
+    for (int tile : {1, 5, 16, 100}) {
+        INFO("tile " << tile);
+        canopy::framebuffer tiled(width, height);
+        int calls = 0;
+        std::atomic<int> pixels{0};
+        canopy::render_tiles(tiled, canopy::tile_shader([&](canopy::tile_grid::rect const& r, std::span<vec4<float>> out) {
+            REQUIRE(out.size() == std::size_t(r.pixels()));
+            std::size_t i = 0;
+            for (int y = r.y0; y < r.y1; ++y)
+                for (int x = r.x0; x < r.x1; ++x) out[i++] = shade(x, y);
+            pixels += r.pixels();
+        }), {.tile_size = tile, .progress = [&](float) { ++calls; }});
+        CHECK(differing_bits(per_pixel, tiled) == 0);
+        CHECK(pixels == width * height);
+        CHECK(calls == canopy::tile_grid(width, height, tile).count());
     }
 }
 

@@ -550,6 +550,44 @@ TEST_CASE("canopy render SCENE writes one image named after the scene") {
     CHECK(image.height == 24);
 }
 
+TEST_CASE("canopy render --mode batch writes the images of --mode single, byte for byte") {
+    temp_folder const folder("canopy_cli_test");
+    auto const images = [&](std::vector<std::string> args, std::string const& mode,
+                            std::vector<std::string> const& names) {
+        fs::path const out = folder.path / mode;
+        args.insert(args.end(), {"-o", out.string(), "--size", "61x45", "--mode", mode, "--threads", "2"});
+        auto const result = run_canopy(args);
+        INFO(result.output);
+        REQUIRE(result.exit_code == 0);
+        std::vector<std::string> bytes;
+        for (auto const& name : names) bytes.push_back(read_bytes(out / name));
+        fs::remove_all(out);
+        return bytes;
+    };
+    // The demo: figures 1-3 in the mode, the heat map always pixel by pixel.
+    std::vector<std::string> const figures{"1_billboards_alpha_ignored.png", "2_texture_alpha_mask.png",
+                                           "3_procedural_alpha_mask.png", "4_bvh_cost_heatmap.png"};
+    auto const demo_single = images({"render"}, "single", figures);
+    auto const demo_batch = images({"render"}, "batch", figures);
+    for (std::size_t k = 0; k < figures.size(); ++k) {
+        INFO(figures[k]);
+        CHECK(!demo_single[k].empty());
+        CHECK(demo_single[k] == demo_batch[k]);
+    }
+    // A scene with the AO and path kernels, jittered samples, through the texture mask and the
+    // bench formats' alpha rule.
+    write_obj(folder.path / "mesh.obj", make_mesh());
+    write_inst(folder.path / "lattice.inst", "mesh.obj", make_instances());
+    std::string const scene = (folder.path / "lattice.inst").string();
+    for (auto const& [kernel, intersector] : {std::pair{"ao", "alpha"}, std::pair{"path", "bench"},
+                                              std::pair{"primary", "none"}}) {
+        INFO(kernel << " " << intersector);
+        std::vector<std::string> const args{"render", scene, "--kernel", kernel, "--intersector", intersector,
+                                            "--spp", "2"};
+        CHECK(images(args, "single", {"lattice.png"}) == images(args, "batch", {"lattice.png"}));
+    }
+}
+
 // ---- scene files, generators and plugins through the command line ---------------------------
 
 namespace {
@@ -741,6 +779,9 @@ TEST_CASE("canopy render refuses options that would be ignored (exit 2)") {
         {{"render", "s.obj", "--kernel", "ao", "--intersector", "costs"}, "--intersector costs draws the heat map"},
         {{"render", "s.obj", "--kernel", "heatmap", "--tonemap", "aces"}, "not to the heat map"},
         {{"render", "--ao-radius", "2"}, "--ao-radius applies to --kernel ao"},
+        {{"render", "s.obj", "--kernel", "heatmap", "--mode", "batch"},
+         "--mode batch does not apply to the heat map"},
+        {{"render", "--mode", "packets"}, "--mode must be single or batch, not 'packets'"},
         {{"render", "gen:sphere:subdivisions=2,subdivisions=3"},
          "generator parameter 'subdivisions' given more than once"},
     });

@@ -9,6 +9,7 @@ module;
 #include <functional>
 #include <span>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -22,7 +23,8 @@ export namespace canopy::distributed {
 // Collective. On rank 0, fb (of the image's size) receives every pixel and options.progress the
 // fraction gathered; on the other ranks fb is left as it is. Pixels travel as float RGBA (16
 // bytes each), the tiles of a range one after the other.
-deal_report render_tiles(communicator const& comm, framebuffer& fb, std::function<vec4<float>(int, int)> const& shade,
+// A tile_shader shades a whole tile at a time (canopy.render:scheduling); shade(x, y) one pixel.
+deal_report render_tiles(communicator const& comm, framebuffer& fb, tile_shader const& shade,
                          tile_options const& options = {}, deal_options dealing = {}) {
     tile_grid const grid(fb.width, fb.height, options.tile_size);
     std::size_t const tile_bytes = std::size_t(grid.tile) * std::size_t(grid.tile) * sizeof(vec4<float>);
@@ -30,15 +32,12 @@ deal_report render_tiles(communicator const& comm, framebuffer& fb, std::functio
         // Tile k of the range at k · tile_bytes (the last row and column of tiles leave a gap).
         std::vector<std::byte> bytes(r.count * tile_bytes);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, r.count, 1), [&](auto const& tiles) {
+            std::vector<vec4<float>> pixels;
             for (std::size_t k = tiles.begin(); k != tiles.end(); ++k) {
                 tile_grid::rect const t = grid.bounds(int(r.first + k));
-                std::byte* out = bytes.data() + k * tile_bytes;
-                for (int y = t.y0; y < t.y1; ++y)
-                    for (int x = t.x0; x < t.x1; ++x) {
-                        vec4<float> const p = shade(x, y);
-                        std::memcpy(out, &p, sizeof p);
-                        out += sizeof p;
-                    }
+                pixels.resize(std::size_t(t.pixels()));
+                shade(t, pixels);
+                std::memcpy(bytes.data() + k * tile_bytes, pixels.data(), pixels.size() * sizeof(vec4<float>));
             }
         });
         return bytes;
@@ -58,6 +57,11 @@ deal_report render_tiles(communicator const& comm, framebuffer& fb, std::functio
     if (options.progress && !dealing.progress)
         dealing.progress = [&](std::size_t done, std::size_t total) { options.progress(float(done) / float(total)); };
     return deal(comm, std::size_t(grid.count()), work, collect, dealing);
+}
+
+deal_report render_tiles(communicator const& comm, framebuffer& fb, std::function<vec4<float>(int, int)> const& shade,
+                         tile_options const& options = {}, deal_options dealing = {}) {
+    return render_tiles(comm, fb, pixel_by_pixel(shade), options, std::move(dealing));
 }
 
 } // namespace canopy::distributed

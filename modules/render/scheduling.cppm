@@ -4,7 +4,10 @@ module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
+#include <cstddef>
 #include <functional>
+#include <span>
+#include <utility>
 export module canopy.render:scheduling;
 import canopy.query;
 import :film;
@@ -38,7 +41,25 @@ struct tile_options {
     std::function<void(float)> progress;
 };
 
+// What a tile shader computes: every pixel of the tile `r`, row by row from the top left, into
+// out[(y - r.y0) * (r.x1 - r.x0) + (x - r.x0)] (out.size() == r.pixels()). A pixel's value must
+// depend on the pixel alone, not on the tile it falls in nor on the thread that shades it.
+using tile_shader = std::function<void(tile_grid::rect const&, std::span<vec4<float>>)>;
+
 // Runs shade(x, y) → vec4 for every pixel, tiles in parallel on all cores (oneTBB).
 void render_tiles(framebuffer& fb, std::function<vec4<float>(int, int)> const& shade, tile_options const& options = {});
+
+// The same with a whole tile shaded at a time (the batch kernels of canopy.render:waves trace a
+// tile's rays together).
+void render_tiles(framebuffer& fb, tile_shader const& shade, tile_options const& options = {});
+
+// A per-pixel shader as a tile shader.
+inline tile_shader pixel_by_pixel(std::function<vec4<float>(int, int)> shade) {
+    return [shade = std::move(shade)](tile_grid::rect const& r, std::span<vec4<float>> out) {
+        std::size_t i = 0;
+        for (int y = r.y0; y < r.y1; ++y)
+            for (int x = r.x0; x < r.x1; ++x) out[i++] = shade(x, y);
+    };
+}
 
 } // namespace canopy

@@ -48,6 +48,17 @@ struct counting_scene {
         rays->fetch_add(1, std::memory_order_relaxed);
         return scene->any_hit(r, isect);
     }
+    template <typename I>
+    canopy::batch_stats closest_hit(std::span<canopy::ray const> rs, std::span<canopy::basic_hit_record<float>> out,
+                                    I& isect) const {
+        rays->fetch_add(rs.size(), std::memory_order_relaxed);
+        return scene->closest_hit(rs, out, isect);
+    }
+    template <typename I>
+    canopy::batch_stats any_hit(std::span<canopy::ray const> rs, std::span<bool> out, I& isect) const {
+        rays->fetch_add(rs.size(), std::memory_order_relaxed);
+        return scene->any_hit(rs, out, isect);
+    }
     canopy::surface_sample surface(canopy::basic_hit_record<float> const& hr, canopy::ray const& r) const {
         return scene->surface(hr, r);
     }
@@ -57,6 +68,7 @@ struct counting_scene {
 struct render_job {
     std::string kernel = "primary";
     std::string intersector = "none";
+    bool batch = true;                  // --mode: each tile's samples traced as waves, or one by one
     int width = 800, height = 600, spp = 1;
     std::filesystem::path output;
     canopy::pinhole_camera camera;
@@ -103,8 +115,7 @@ float ao_radius(canopy::compiled_scene const& scene, render_job const& job) {
 
 // canopy::render_tiles, or across the ranks under mpirun: the image on rank 0 (the other ranks'
 // framebuffers stay black).
-void tiles(canopy::framebuffer& fb, std::function<canopy::vec4<float>(int, int)> const& shade,
-           canopy::tile_options const& options) {
+void tiles(canopy::framebuffer& fb, canopy::tile_shader const& shade, canopy::tile_options const& options) {
 #if CANOPY_WITH_MPI
     if (distributed()) {
         record_sharing(dist::render_tiles(ranks, fb, shade, options));
@@ -120,7 +131,7 @@ canopy::framebuffer render_with(render_job const& job, I const& prototype, Kerne
     canopy::framebuffer fb(job.width, job.height);
     tiles(
         fb,
-        [&](int x, int y) {
+        canopy::pixel_by_pixel([&](int x, int y) {
             canopy::vec4<float> sum;
             for (int s = 0; s < job.spp; ++s) {
                 canopy::pixel_random rng(1u, x, y, s);
@@ -129,9 +140,51 @@ canopy::framebuffer render_with(render_job const& job, I const& prototype, Kerne
                 sum = sum + kernel(job.camera.primary_ray(float(x) + jx, float(y) + jy, job.width, job.height), isect, rng);
             }
             return sum * (1.0f / float(job.spp));
+        }),
+        {.tile_size = 16, .progress = [&](float f) { bar.update(f); }});
+    return fb;
+}
+
+// The same image as render_with, bit for bit, with wave(rays, rngs, isect, colours) shading a
+// tile's pixels one sample at a time (a wave of canopy.render:waves; the tile's camera rays row by
+// row, so that runs of 8 along a row trace as packets).
+template <typename I, typename Wave>
+canopy::framebuffer render_waves_with(render_job const& job, I const& prototype, Wave const& wave, progress_bar& bar) {
+    canopy::framebuffer fb(job.width, job.height);
+    tiles(
+        fb,
+        [&](canopy::tile_grid::rect const& r, std::span<canopy::vec4<float>> sums) {
+            std::size_t const n = std::size_t(r.pixels());
+            std::vector<canopy::ray> rays(n);
+            std::vector<canopy::pixel_random> rngs;
+            std::vector<canopy::vec4<float>> colours(n);
+            std::fill(sums.begin(), sums.end(), canopy::vec4<float>());
+            for (int s = 0; s < job.spp; ++s) {
+                rngs.clear();
+                std::size_t i = 0;
+                for (int y = r.y0; y < r.y1; ++y)
+                    for (int x = r.x0; x < r.x1; ++x, ++i) {
+                        canopy::pixel_random& rng = rngs.emplace_back(1u, x, y, s);
+                        float const jx = job.spp > 1 ? rng.next() : 0.5f, jy = job.spp > 1 ? rng.next() : 0.5f;
+                        rays[i] = job.camera.primary_ray(float(x) + jx, float(y) + jy, job.width, job.height);
+                    }
+                I isect = prototype;
+                wave(std::span<canopy::ray const>(rays), std::span(rngs), isect, std::span(colours));
+                for (std::size_t k = 0; k < n; ++k) sums[k] = sums[k] + colours[k];
+            }
+            for (auto& sum : sums) sum = sum * (1.0f / float(job.spp));
         },
         {.tile_size = 16, .progress = [&](float f) { bar.update(f); }});
     return fb;
+}
+
+// render_waves_with or render_with, as the job's --mode says; kernel(ray, isect, rng) → colour,
+// wave(rays, rngs, isect, colours).
+template <typename I, typename Kernel, typename Wave>
+canopy::framebuffer render_in_mode(render_job const& job, I const& prototype, Kernel const& kernel, Wave const& wave,
+                                   progress_bar& bar) {
+    if (job.batch) return render_waves_with(job, prototype, wave, bar);
+    return render_with(job, prototype, kernel, bar);
 }
 
 // ---- the tables ----------------------------------------------------------------------------
@@ -148,28 +201,45 @@ struct kernel_row {
 constexpr std::tuple render_kernels{
     kernel_row{"primary", " (default)", true,
                []<typename I>(counting_scene const& scene, render_job const& job, I const& prototype, progress_bar& bar) {
-                   return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random&) {
-                       return canopy::primary_kernel(scene, r, isect);
-                   }, bar);
+                   return render_in_mode(
+                       job, prototype,
+                       [&](canopy::ray const& r, I& isect, canopy::pixel_random&) {
+                           return canopy::primary_kernel(scene, r, isect);
+                       },
+                       [&](auto rays, auto, I& isect, auto colours) { canopy::primary_wave(scene, rays, isect, colours); },
+                       bar);
                }},
     kernel_row{"ao", "", true,
                []<typename I>(counting_scene const& scene, render_job const& job, I const& prototype, progress_bar& bar) {
                    canopy::ao_options const ao{.samples = 8, .radius = ao_radius(*scene.scene, job)};
-                   return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
-                       return canopy::ao_kernel(scene, r, isect, rng, ao);
-                   }, bar);
+                   return render_in_mode(
+                       job, prototype,
+                       [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
+                           return canopy::ao_kernel(scene, r, isect, rng, ao);
+                       },
+                       [&](auto rays, auto rngs, I& isect, auto colours) {
+                           canopy::ao_wave(scene, rays, rngs, isect, colours, ao);
+                       },
+                       bar);
                }},
     // The path kernel adds a point light (the scene's, or one above the middle of the scene) to
     // the sun and the sky.
     kernel_row{"path", "", true,
                []<typename I>(counting_scene const& scene, render_job const& job, I const& prototype, progress_bar& bar) {
                    canopy::path_options const path{.bounces = 3, .light = scene.scene->render_lights(job.scene_name)};
-                   return render_with(job, prototype, [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
-                       return canopy::path_kernel(scene, r, isect, rng, path);
-                   }, bar);
+                   return render_in_mode(
+                       job, prototype,
+                       [&](canopy::ray const& r, I& isect, canopy::pixel_random& rng) {
+                           return canopy::path_kernel(scene, r, isect, rng, path);
+                       },
+                       [&](auto rays, auto rngs, I& isect, auto colours) {
+                           canopy::path_wave(scene, rays, rngs, isect, colours, path);
+                       },
+                       bar);
                }},
     // Box + triangle tests of each primary ray through counting<I> (I: the costs intersector, the
-    // texture alpha mask), as a heat map whose 99th percentile is red.
+    // texture alpha mask), as a heat map whose 99th percentile is red. Pixel by pixel: each pixel
+    // counts through its own copy of the counter.
     kernel_row{"heatmap", "", false,
                []<typename I>(counting_scene const& scene, render_job const& job, I const& prototype, progress_bar& bar) {
                    using counter = canopy::counting<I>;
@@ -270,8 +340,8 @@ std::pair<int, int> parse_size(std::string const& text) {
 std::string render_options_usage() {
     return std::string("usage: canopy render [SCENE] [-o OUT] [--size WxH] [--spp N] [--kernel KIND]\n"
                        "                     [--intersector KIND] [--ao-radius R[%]] [--exposure EV]\n"
-                       "                     [--tonemap CURVE] [--threads N] [--plugin FILE]... [--quality Q]\n"
-                       "                     [limits]\n"
+                       "                     [--tonemap CURVE] [--threads N] [--mode MODE] [--plugin FILE]...\n"
+                       "                     [--quality Q] [limits]\n"
                        "  SCENE               a file any registered plugin loads (canopy info --plugins lists them),\n"
                        "                      or gen:NAME[:KEY=VALUE,...] for a registered generator; without it, the\n"
                        "                      built-in demo scene is rendered into the four images of the paper's\n"
@@ -291,6 +361,9 @@ std::string render_options_usage() {
            "  --tonemap CURVE     none (clip at 1), reinhard (x/(1+x)) or aces (filmic); default aces\n"
            "                      for the path kernel, none for primary and ao; not for the heat map\n"
            "  --threads N         worker threads, 1 to 1024 (default: all cores)\n"
+           "  --mode MODE         batch (default): each tile's samples traced together, coherent rays\n"
+           "                      as packets; single: one ray at a time. The images are identical.\n"
+           "                      The heat map is always single\n"
            "  --plugin FILE       load a shared-library plugin first (may be repeated)\n";
 }
 
@@ -310,6 +383,7 @@ int run_render(std::span<char*> all_args) {
                                                       {"--exposure"},
                                                       {"--tonemap"},
                                                       {"--threads"},
+                                                      {"--mode"},
                                                       {"--plugin", true, true},
                                                       {"--quality"}});
     if (args.help) {
@@ -352,6 +426,12 @@ int run_render(std::span<char*> all_args) {
         base.kernel = "heatmap";
         base.intersector = "costs";
     }
+    std::string const mode = args.value_or("--mode", heatmap ? "single" : "batch");
+    if (mode != "single" && mode != "batch")
+        throw usage_error("--mode must be single or batch, not " + quote(mode));
+    if (heatmap && mode == "batch")
+        throw usage_error("--mode batch does not apply to the heat map: each pixel counts the tests of its own ray");
+    base.batch = mode == "batch";
     if (args.has("--ao-radius")) {
         if (base.kernel != "ao") throw usage_error("--ao-radius applies to --kernel ao");
         std::string_view text = args.value("--ao-radius");
