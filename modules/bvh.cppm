@@ -10,6 +10,7 @@ export import canopy.intersector;
 export import :storage;
 export import :protocol;
 export import :parallel;
+export import :build_buffer;
 export import :wide;
 export import :binning;
 export import :object;

@@ -31,6 +31,7 @@ export module canopy.bvh:build;
 import canopy.geometry;
 import :storage;
 import :parallel;
+import :build_buffer;
 import :wide;
 import :binning;
 import :object;
@@ -93,7 +94,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     detail::build_context<S> ctx;
     ctx.options = options;
     if constexpr (stores_triangle_blocks_v<Prim>) ctx.block_size = triangle_block_width;
-    ctx.refs.resize(n);
+    ctx.refs.resize(n); // not zeroed (build_buffer): filled here in parallel
     parallel_for_chunks(n, 1024, [&](std::size_t first, std::size_t last) {
         for (std::size_t i = first; i < last; ++i) {
             auto const box = get_bounds(prims[i]);
@@ -101,14 +102,18 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
         }
     });
 
-    result.nodes.resize(2 * n - 1);
-    ctx.nodes = &result.nodes;
+    detail::build_buffer<bvh_node<S>> nodes;
+    nodes.resize(2 * n - 1); // not zeroed: only the nodes made are written, and copied
+    ctx.nodes = &nodes;
     detail::bin_scratch<S> scratch(options.bins);
     detail::build_node(ctx, scratch, 0, 0, n, 0, detail::bounds_of(ctx, 0, n));
-    result.nodes.resize(ctx.node_count.load());
+    result.nodes.assign(nodes.begin(), nodes.begin() + std::ptrdiff_t(ctx.node_count.load()));
+    nodes = {};
     result.depth = ctx.depth.load();
     std::vector<std::uint32_t> order(n);
-    for (std::size_t i = 0; i < n; ++i) order[i] = ctx.refs[i].index;
+    parallel_for_chunks(n, 4096, [&](std::size_t first, std::size_t last) {
+        for (std::size_t i = first; i < last; ++i) order[i] = ctx.refs[i].index;
+    });
     ctx.refs = {};
     detail::finish_build(result, prims, order);
     return result;

@@ -29,6 +29,7 @@ export module canopy.bvh:object;
 import canopy.geometry;
 import :storage;
 import :parallel;
+import :build_buffer;
 import :binning;
 
 namespace canopy::detail {
@@ -52,8 +53,8 @@ struct prim_ref {
 
 template <typename S>
 struct build_context {
-    std::vector<prim_ref<S>> refs;
-    std::vector<bvh_node<S>>* nodes = nullptr;
+    build_buffer<prim_ref<S>> refs;     // sized without being zeroed: filled in parallel
+    build_buffer<bvh_node<S>>* nodes = nullptr; // each node written whole by the step creating it
     std::atomic<std::uint32_t> node_count{1};
     std::atomic<int> depth{0};
     bvh_build_options options;
@@ -258,17 +259,28 @@ std::size_t partition_object(build_context<S>& ctx, bin_scratch<S> const& scratc
         right = bounds_of(ctx, mid, end);
         return mid;
     }
+    // Hoare's scheme: each reference is read once, and only misplaced pairs are swapped.
     prim_ref<S>* const refs = ctx.refs.data();
+    int const axis = best.axis;
+    auto const goes_left = [&](vec3<S> const& c) { return binning.index(axis, c[axis]) < best.split; };
     std::size_t i = begin, j = end;
-    while (i < j) {
-        vec3<S> const c = refs[i].doubled_center();
-        if (binning.index(best.axis, c[best.axis]) < best.split) {
-            left.centroids = extend(left.centroids, c);
+    for (;;) {
+        vec3<S> ci, cj;
+        while (i < j && goes_left(ci = refs[i].doubled_center())) {
+            left.centroids = extend(left.centroids, ci);
             ++i;
-        } else {
-            right.centroids = extend(right.centroids, c);
-            std::swap(refs[i], refs[--j]);
         }
+        while (i < j && !goes_left(cj = refs[j - 1].doubled_center())) {
+            right.centroids = extend(right.centroids, cj);
+            --j;
+        }
+        if (i >= j) break;
+        // refs[i] goes right and refs[j - 1] left (so i + 1 < j): swap them.
+        std::swap(refs[i], refs[j - 1]);
+        left.centroids = extend(left.centroids, cj);
+        right.centroids = extend(right.centroids, ci);
+        ++i;
+        --j;
     }
     object_side_bounds(scratch, binning, best, left.bounds, right.bounds);
     return i;

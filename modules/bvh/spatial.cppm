@@ -46,6 +46,7 @@ export module canopy.bvh:spatial;
 import canopy.geometry;
 import :storage;
 import :parallel;
+import :build_buffer;
 import :wide;
 import :binning;
 import :object;
@@ -578,9 +579,13 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     ctx.object.options = options;
     if constexpr (stores_triangle_blocks_v<Prim>) ctx.object.block_size = triangle_block_width;
     auto& refs = ctx.object.refs;
-    refs.resize(n + budget);
-    parallel_for_chunks(n, 1024, [&](std::size_t first, std::size_t last) {
+    refs.resize(n + budget); // not zeroed (build_buffer): filled here, the slack for the clipped pieces too
+    parallel_for_chunks(n + budget, 1024, [&](std::size_t first, std::size_t last) {
         for (std::size_t i = first; i < last; ++i) {
+            if (i >= n) {
+                refs[i] = prim_ref<S>{};
+                continue;
+            }
             auto const box = get_bounds(prims[i]);
             refs[i] = {box.min, std::uint32_t(i), box.max};
         }
@@ -589,11 +594,13 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     for (std::size_t i = 0; i < n; ++i) root = extend(root, refs[i].box());
     double const overlap = std::isfinite(options.split_overlap) ? std::max(0.0, double(options.split_overlap)) : 0.0;
     ctx.min_overlap = overlap * double(surface_area(root));
-    result.nodes.resize(2 * (n + budget) - 1);
-    ctx.object.nodes = &result.nodes;
+    build_buffer<bvh_node<S>> nodes;
+    nodes.resize(2 * (n + budget) - 1); // not zeroed: only the nodes made are written, and copied
+    ctx.object.nodes = &nodes;
     spatial_scratch<S> scratch(options.bins);
     build_spatial_node(ctx, scratch, 0, 0, n, 0, budget);
-    result.nodes.resize(ctx.object.node_count.load());
+    result.nodes.assign(nodes.begin(), nodes.begin() + std::ptrdiff_t(ctx.object.node_count.load()));
+    nodes = {};
     result.depth = ctx.object.depth.load();
     // The leaves' references, in node order, without the slack left between them.
     std::vector<std::uint32_t> order;

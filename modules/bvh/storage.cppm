@@ -20,6 +20,7 @@ module;
 #include <vector>
 export module canopy.bvh:storage;
 import canopy.geometry;
+import :build_buffer;
 
 export namespace canopy {
 
@@ -82,6 +83,10 @@ inline constexpr bool stores_triangle_blocks_v = std::is_same_v<Prim, triangle>;
 //         the boxes' area), else fast: the default. bvh::quality says which one a build used.
 enum class build_quality { fast, high, automatic };
 
+// The wide nodes of a BVH (canopy.bvh:build_buffer for the allocator).
+template <typename S>
+using wide_node_array = std::vector<wide_bvh_node<S>, large_array_allocator<wide_bvh_node<S>>>;
+
 template <typename Prim>
 struct bvh {
     using primitive_type = Prim;
@@ -90,9 +95,10 @@ struct bvh {
     using acceleration_structure_tag = void;
 
     std::vector<node_type> nodes;   // binary tree, nodes[0] is the root; empty for an empty BVH
-    std::vector<wide_bvh_node<value_type>> wide_nodes; // the same tree, 8-wide; [0] is the root
+    wide_node_array<value_type> wide_nodes; // the same tree, 8-wide; [0] is the root
     std::vector<Prim> primitives;   // in leaf order; empty when stores_triangle_blocks_v<Prim>
-    std::vector<triangle_block> blocks; // stores_triangle_blocks_v<Prim>: the leaves' triangles
+    std::vector<triangle_block, large_array_allocator<triangle_block>>
+        blocks;                     // stores_triangle_blocks_v<Prim>: the leaves' triangles
     std::size_t size = 0;           // number of input primitives (leaves may hold more references: build_quality::high)
     int depth = 0;                  // number of node levels (a single leaf: 1)
     build_quality quality = build_quality::fast; // how it was built (fast or high, automatic resolved)

@@ -26,7 +26,7 @@ namespace detail {
 
 template <typename S>
 std::uint32_t collapse_node(std::vector<bvh_node<S>> const& nodes, std::uint32_t binary_index,
-                            std::vector<wide_bvh_node<S>>& wide) {
+                            wide_node_array<S>& wide) {
     // Gather the children: start from the binary node's two, open the largest inner one.
     std::uint32_t slots[bvh_width];
     int n = 0;
@@ -83,8 +83,8 @@ std::uint32_t collapse_node(std::vector<bvh_node<S>> const& nodes, std::uint32_t
 
 // The wide layout of a binary tree (empty for an empty tree).
 template <typename S>
-std::vector<wide_bvh_node<S>> collapse_to_wide(std::vector<bvh_node<S>> const& nodes) {
-    std::vector<wide_bvh_node<S>> wide;
+wide_node_array<S> collapse_to_wide(std::vector<bvh_node<S>> const& nodes) {
+    wide_node_array<S> wide;
     if (nodes.empty()) return wide;
     wide.reserve(nodes.size() / 4 + 1);
     detail::collapse_node(nodes, 0, wide);
@@ -130,11 +130,17 @@ void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector
         auto const k = std::size_t(std::lower_bound(leaf_starts.begin(), leaf_starts.end(), start) - leaf_starts.begin());
         return first_block[k];
     };
-    for (auto& n : b.nodes)
-        if (n.is_leaf()) n.index = block_of(n.index);
-    for (auto& node : b.wide_nodes)
-        for (std::size_t k = 0; k < std::size_t(bvh_width); ++k)
-            if (node.count[k] != 0) node.child[k] = block_of(node.child[k]);
+    parallel_for_chunks(b.nodes.size(), 4096, [&](std::size_t first, std::size_t last) {
+        for (std::size_t i = first; i < last; ++i)
+            if (b.nodes[i].is_leaf()) b.nodes[i].index = block_of(b.nodes[i].index);
+    });
+    parallel_for_chunks(b.wide_nodes.size(), 1024, [&](std::size_t first, std::size_t last) {
+        for (std::size_t i = first; i < last; ++i) {
+            auto& node = b.wide_nodes[i];
+            for (std::size_t k = 0; k < std::size_t(bvh_width); ++k)
+                if (node.count[k] != 0) node.child[k] = block_of(node.child[k]);
+        }
+    });
     b.primitives = {};
 }
 

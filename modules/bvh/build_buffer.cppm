@@ -1,0 +1,90 @@
+// canopy.bvh:build_buffer — how the BVH's large arrays are allocated.
+//
+// large_array_allocator<T> (exported: the type of bvh::wide_nodes and bvh::blocks): std::allocator,
+// except that arrays of 2 MiB and more start on a 2 MiB boundary and are offered to the kernel as
+// huge pages (Linux's transparent huge pages in `madvise` mode, where the system allows them): one
+// page fault per 2 MiB instead of one per 4 KiB when the builder first writes them. Elements are
+// constructed as by std::allocator.
+//
+// build_buffer<T> (the builder's own): a vector whose resize() leaves new elements as the
+// allocation made them. std::vector::resize value-initialises every new element on one thread:
+// for the 1.3M-triangle sphere, 42 MB of references and 84 MB of binary nodes (2n − 1, of which a
+// quarter is used) were zeroed before the parallel build started. With build_buffer, pages are
+// first touched by the (parallel) code that fills them, and pages never used are never touched.
+// Contract: T is trivially copyable and trivially destructible (an implicit-lifetime type, whose
+// objects the allocation creates); every element is written whole before it is read. The
+// builder's uses: prim_ref (filled in parallel from the input), bvh_node (each node written by
+// the build step that creates it).
+module;
+#include <cstddef>
+#include <memory>
+#include <new>
+#include <type_traits>
+#include <utility>
+#include <vector>
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+export module canopy.bvh:build_buffer;
+
+export namespace canopy {
+
+template <typename T>
+struct large_array_allocator {
+    using value_type = T;
+    static constexpr std::size_t huge_page = std::size_t(2) << 20;
+
+    large_array_allocator() = default;
+    template <typename U>
+    large_array_allocator(large_array_allocator<U> const&) noexcept {}
+
+    T* allocate(std::size_t n) {
+        if (n > std::size_t(-1) / sizeof(T)) throw std::bad_array_new_length();
+        std::size_t const bytes = n * sizeof(T);
+        if (bytes < huge_page) return std::allocator<T>().allocate(n);
+        void* const p = ::operator new(bytes, std::align_val_t(huge_page));
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+        ::madvise(p, bytes, MADV_HUGEPAGE); // advice only: where it fails, pages stay 4 KiB
+#endif
+        return static_cast<T*>(p);
+    }
+    void deallocate(T* p, std::size_t n) noexcept {
+        if (n * sizeof(T) < huge_page) return std::allocator<T>().deallocate(p, n);
+        ::operator delete(p, std::align_val_t(huge_page));
+    }
+
+    template <typename U>
+    bool operator==(large_array_allocator<U> const&) const noexcept {
+        return true;
+    }
+};
+
+} // namespace canopy
+
+namespace canopy::detail {
+
+template <typename T>
+struct uninitialized_allocator : large_array_allocator<T> {
+    static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>,
+                  "uninitialized_allocator: for implicit-lifetime element types only");
+    template <typename U>
+    struct rebind {
+        using other = uninitialized_allocator<U>;
+    };
+    uninitialized_allocator() = default;
+    template <typename U>
+    uninitialized_allocator(uninitialized_allocator<U> const&) noexcept {}
+
+    // Value-initialisation (resize(n)): nothing; the caller writes the element before reading it.
+    template <typename U>
+    void construct(U*) noexcept {}
+    template <typename U, typename... Args>
+    void construct(U* p, Args&&... args) {
+        std::construct_at(p, std::forward<Args>(args)...);
+    }
+};
+
+template <typename T>
+using build_buffer = std::vector<T, uninitialized_allocator<T>>;
+
+} // namespace canopy::detail
