@@ -632,6 +632,37 @@ TEST_CASE("the same tree on one thread and on two, whatever the parallel thresho
     CHECK(same_tree(chunked, whole));
 }
 
+TEST_CASE("a BVH's large arrays start on 2 MiB boundaries, and a copy of a BVH holds the same tree and blocks") {
+    constexpr std::uintptr_t huge_page = std::uintptr_t(2) << 20;
+    // large_array_allocator on its own: 3 MiB aligned, 1 KiB as std::allocator gives it.
+    canopy::large_array_allocator<float> floats;
+    float* const large = floats.allocate((3u << 20) / sizeof(float));
+    CHECK(reinterpret_cast<std::uintptr_t>(large) % huge_page == 0);
+    large[0] = 1.0f;
+    large[(3u << 20) / sizeof(float) - 1] = 2.0f;
+    floats.deallocate(large, (3u << 20) / sizeof(float));
+    float* const small = floats.allocate(256);
+    small[255] = 3.0f;
+    floats.deallocate(small, 256);
+
+    random_source rng(7);
+    auto const soup = soup_to_renumber(rng, 60000, 50.0f, 1.0f);
+    mesh_bvh const b = canopy::build_binned_sah(soup, {.quality = canopy::build_quality::fast});
+    std::size_t const block_bytes = b.blocks.size() * sizeof(b.blocks[0]);
+    REQUIRE(block_bytes >= std::size_t(huge_page)); // the case under test
+    CHECK(reinterpret_cast<std::uintptr_t>(b.blocks.data()) % huge_page == 0);
+    mesh_bvh const copy = b;
+    CHECK(same_tree(copy, b));
+    REQUIRE(copy.blocks.size() == b.blocks.size());
+    std::size_t differing = 0;
+    for (std::size_t k = 0; k < b.blocks.size(); ++k)
+        differing += copy.blocks[k].vertex != b.blocks[k].vertex || copy.blocks[k].prim_id != b.blocks[k].prim_id ||
+                     copy.blocks[k].geom_id != b.blocks[k].geom_id || copy.blocks[k].testable != b.blocks[k].testable;
+    CHECK(differing == 0);
+    CHECK(reinterpret_cast<std::uintptr_t>(copy.blocks.data()) % huge_page == 0);
+    check_build_contract(soup, copy, {});
+}
+
 TEST_CASE("build_quality::high keeps max_depth, and never splits triangles with NaN or infinite coordinates") {
     random_source rng(72);
     auto input = test_support::sliver_mesh();
