@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -630,6 +631,26 @@ TEST_CASE("the same tree on one thread and on two, whatever the parallel thresho
     for (auto const& n : chunked.nodes) references += n.is_leaf() ? n.count : 0;
     CHECK(references > slivers.size()); // spatial splits did happen
     CHECK(same_tree(chunked, whole));
+}
+
+TEST_CASE("a build's phase times are each non-negative and together within the build's own time") {
+    random_source rng(11);
+    auto const soup = soup_to_renumber(rng, 20000, 20.0f, 1.0f);
+    for (auto const quality : {canopy::build_quality::fast, canopy::build_quality::high}) {
+        INFO((quality == canopy::build_quality::high ? "high" : "fast"));
+        auto const start = std::chrono::steady_clock::now();
+        mesh_bvh const b = canopy::build_binned_sah(soup, {.quality = quality});
+        double const elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        auto const& p = b.build_phases;
+        CHECK(p.references >= 0.0);
+        CHECK(p.tree > 0.0);
+        CHECK(p.wide_nodes >= 0.0);
+        CHECK(p.leaves > 0.0);
+        CHECK(p.total() <= elapsed);
+    }
+    CHECK(mesh_bvh{}.build_phases.total() == 0.0);
+    std::vector<triangle> const none;
+    CHECK(canopy::build_binned_sah(none).build_phases.total() == 0.0);
 }
 
 TEST_CASE("a BVH's large arrays start on 2 MiB boundaries, and a copy of a BVH holds the same tree and blocks") {

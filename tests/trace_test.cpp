@@ -17,6 +17,7 @@
 #include <iterator>
 #include <limits>
 #include <random>
+#include <regex>
 #include <string>
 #include <vector>
 #include <sys/stat.h>
@@ -1348,6 +1349,17 @@ TEST_CASE("canopy info and render take --quality automatic|fast|high, info repor
         CHECK_THAT(result.output, Catch::Contains(std::string("- mesh BVHs built at quality ") +
                                                   (automatic ? "automatic (the default): " + std::to_string(split) + " of "
                                                              : (high ? "high" : "fast"))));
+        // The phases: each shown, and together within the mesh builds' time.
+        std::smatch total, phases;
+        std::regex const total_line("mesh BVH build: quality [^\n]*?, ([0-9.]+) ms, SAH");
+        std::regex const phase_line("mesh BVH build phases(?: \\(summed over the meshes\\))?: references ([0-9.]+) ms, "
+                                    "binary tree ([0-9.]+) ms, wide nodes ([0-9.]+) ms, leaves ([0-9.]+) ms");
+        REQUIRE(std::regex_search(result.output, total, total_line));
+        REQUIRE(std::regex_search(result.output, phases, phase_line));
+        double sum = 0.0;
+        for (int k = 1; k <= 4; ++k) sum += std::stod(phases[k].str());
+        CHECK(sum <= std::stod(total[1].str()) + 0.005); // each printed to 0.001 ms
+        CHECK(std::stod(phases[2].str()) + std::stod(phases[4].str()) > 0.0);
     }
 
     // render at high renders the scene and says so.

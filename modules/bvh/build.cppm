@@ -16,6 +16,7 @@ module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
+#include <chrono>
 #include <array>
 #include <atomic>
 #include <bit>
@@ -91,6 +92,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
         }
     }
 
+    auto clock = std::chrono::steady_clock::now();
     detail::build_context<S> ctx;
     ctx.options = options;
     if constexpr (stores_triangle_blocks_v<Prim>) ctx.block_size = triangle_block_width;
@@ -101,6 +103,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
             ctx.refs[i] = {box.min, std::uint32_t(i), box.max};
         }
     });
+    result.build_phases.references = detail::lap(clock);
 
     detail::build_buffer<bvh_node<S>> nodes;
     nodes.resize(2 * n - 1); // not zeroed: only the nodes made are written, and copied
@@ -115,6 +118,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
         for (std::size_t i = first; i < last; ++i) order[i] = ctx.refs[i].index;
     });
     ctx.refs = {};
+    result.build_phases.tree = detail::lap(clock);
     detail::finish_build(result, prims, order);
     return result;
 }

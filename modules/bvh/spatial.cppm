@@ -34,6 +34,7 @@ module;
 #include <algorithm>
 #include <bit>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -574,6 +575,7 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     // References are numbered in 32 bits, as primitives are.
     auto const budget = std::size_t(std::min(double(n) * fraction, double(std::numeric_limits<std::uint32_t>::max() / 2) - double(n)));
 
+    auto clock = std::chrono::steady_clock::now();
     spatial_context<Prim> ctx;
     ctx.prims = prims;
     ctx.object.options = options;
@@ -592,6 +594,7 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     });
     basic_aabb<S> root;
     for (std::size_t i = 0; i < n; ++i) root = extend(root, refs[i].box());
+    result.build_phases.references = lap(clock);
     double const overlap = std::isfinite(options.split_overlap) ? std::max(0.0, double(options.split_overlap)) : 0.0;
     ctx.min_overlap = overlap * double(surface_area(root));
     build_buffer<bvh_node<S>> nodes;
@@ -612,6 +615,7 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
         node.index = first;
     }
     refs = {};
+    result.build_phases.tree = lap(clock);
     finish_build(result, prims, order);
     return result;
 }

@@ -12,6 +12,7 @@ module;
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -87,6 +88,29 @@ enum class build_quality { fast, high, automatic };
 template <typename S>
 using wide_node_array = std::vector<wide_bvh_node<S>, large_array_allocator<wide_bvh_node<S>>>;
 
+// Where a build's time went, in seconds (canopy info prints it): the input's boxes as the
+// builder's references; the binary tree (binning, SAH sweeps, partitions, and at build_quality::high
+// the spatial splits); the collapse to wide nodes; the leaves' primitives (triangle blocks) in
+// leaf order. A BVH that was not built (default-constructed, or built from nothing) has zeros.
+struct build_phase_times {
+    double references = 0.0;
+    double tree = 0.0;
+    double wide_nodes = 0.0;
+    double leaves = 0.0;
+
+    double total() const { return references + tree + wide_nodes + leaves; }
+};
+
+namespace detail {
+// Seconds since `start`, and `start` moved to now: the builder's phase timer.
+inline double lap(std::chrono::steady_clock::time_point& start) {
+    auto const now = std::chrono::steady_clock::now();
+    double const seconds = std::chrono::duration<double>(now - start).count();
+    start = now;
+    return seconds;
+}
+} // namespace detail
+
 template <typename Prim>
 struct bvh {
     using primitive_type = Prim;
@@ -102,6 +126,7 @@ struct bvh {
     std::size_t size = 0;           // number of input primitives (leaves may hold more references: build_quality::high)
     int depth = 0;                  // number of node levels (a single leaf: 1)
     build_quality quality = build_quality::fast; // how it was built (fast or high, automatic resolved)
+    build_phase_times build_phases;              // where the build's time went
 
     bool empty() const { return nodes.empty(); }
     std::size_t primitive_count() const { return size; }

@@ -9,6 +9,7 @@ module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -152,7 +153,9 @@ namespace detail {
 // in leaf order with prim_id = their input index (triangle BVHs: in blocks, pack_triangle_blocks).
 template <typename Prim>
 void finish_build(bvh<Prim>& result, std::span<Prim const> prims, std::vector<std::uint32_t> const& order) {
+    auto clock = std::chrono::steady_clock::now();
     result.wide_nodes = collapse_to_wide(result.nodes);
+    result.build_phases.wide_nodes = lap(clock);
     result.size = prims.size();
     if constexpr (stores_triangle_blocks_v<Prim>) {
         pack_triangle_blocks(result, prims, order);
@@ -166,6 +169,7 @@ void finish_build(bvh<Prim>& result, std::span<Prim const> prims, std::vector<st
             }
         });
     }
+    result.build_phases.leaves = lap(clock);
 }
 
 } // namespace detail

@@ -97,6 +97,17 @@ int run_info(std::span<char*> all_args) {
     fmt::print("mesh BVH build: quality {}, {:.3f} ms, SAH cost {:.2f}{}, {:.1f} bytes/triangle\n",
                quality_text, st.mesh_build_seconds * 1e3, mesh_sah * per_triangle,
                c.meshes.size() == 1 ? "" : " (mean over triangles)", mesh_bytes * per_triangle);
+    canopy::build_phase_times phases;
+    for (auto const& m : c.meshes) {
+        phases.references += m.accel.build_phases.references;
+        phases.tree += m.accel.build_phases.tree;
+        phases.wide_nodes += m.accel.build_phases.wide_nodes;
+        phases.leaves += m.accel.build_phases.leaves;
+    }
+    fmt::print("mesh BVH build phases{}: references {:.3f} ms, binary tree {:.3f} ms, wide nodes {:.3f} ms, leaves "
+               "{:.3f} ms\n",
+               c.meshes.size() == 1 ? "" : " (summed over the meshes)", phases.references * 1e3, phases.tree * 1e3,
+               phases.wide_nodes * 1e3, phases.leaves * 1e3);
     if (c.meshes.size() == 1) {
         print_stats("mesh BVH", canopy::compute_stats(c.meshes[0].accel));
     } else {
