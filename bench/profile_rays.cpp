@@ -1,8 +1,10 @@
 // profile_rays — one scene, one ray set, one query, traced in one function, for profilers:
-// callgrind counts instructions per ray (bench/profile.sh), perf samples where the time goes.
+// callgrind counts instructions per ray (--toggle-collect on trace_rays, docs/performance.md), perf
+// samples where the time goes.
 //
 //   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]
-//                        [--quality automatic|fast|high] [--split-budget F] [--batch]
+//                        [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L]
+//                        [--batch]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow        QUERY  closest | any
 //
@@ -10,7 +12,8 @@
 // only function a profiler needs to look at, then prints the ray count, hits, nanoseconds per ray
 // (the fastest pass) and, from an untimed pass with a counting intersector, box and triangle
 // tests per ray. The mesh BVH is built at --quality (default fast; high: spatial splits, with
-// --split-budget, default 0.3); its statistics line gives the references its leaves hold, its SAH
+// --split-budget, default 0.3), with B SAH bins per axis and leaves of at most L primitives (the
+// defaults of bvh_build_options unless given); its statistics line gives the references its leaves hold, its SAH
 // cost and its build time. --batch traces the set through the batch queries (canopy.query:batch,
 // packets of 8 coherent rays) instead, and prints how many packets and single rays they traced, with
 // the tests per packet (one box or triangle test for its 8 lanes) and per single ray.
@@ -48,7 +51,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--batch]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L] [--batch]\n",
                  program);
     return 2;
 }
@@ -103,6 +106,10 @@ int main(int argc, char** argv) {
         else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
         else if (a == "--quality" && i + 1 < argc) {
             if (!parse_quality(argv[++i], options.quality)) return usage(argv[0]);
+        } else if (a == "--bins" && i + 1 < argc) {
+            options.bins = std::atoi(argv[++i]);
+        } else if (a == "--max-leaf" && i + 1 < argc) {
+            options.max_leaf_size = std::atoi(argv[++i]);
         } else if (a == "--split-budget" && i + 1 < argc) {
             options.split_budget = float(std::atof(argv[++i]));
         }
