@@ -82,9 +82,10 @@ inline bool parse_quality(std::string const& name, build_quality& quality) {
 // The batch queries (canopy.query:batch) over all of `rays`.
 template <typename Isect>
 batch_stats canopy_trace_batch(canopy_scene const& s, std::span<ray const> rays, bool closest, Isect& isect,
-                               std::span<basic_hit_record<float>> out) {
+                               std::span<basic_hit_record<float>> out, batch_packing packing = batch_packing::adaptive) {
     return s.scene.visit_root([&](auto const& root) {
-        return closest ? closest_hit(rays, &root, &root + 1, out, isect) : any_hit(rays, &root, &root + 1, out, isect);
+        return closest ? closest_hit(rays, &root, &root + 1, out, isect, packing)
+                       : any_hit(rays, &root, &root + 1, out, isect, packing);
     });
 }
 

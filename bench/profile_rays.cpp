@@ -4,7 +4,7 @@
 //
 //   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]
 //                        [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L]
-//                        [--batch]
+//                        [--batch [--packets-always]] [--compare-packing]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow        QUERY  closest | any
 //
@@ -16,10 +16,15 @@
 // defaults of bvh_build_options unless given); its statistics line gives the references its leaves hold, its SAH
 // cost and its build time. --batch traces the set through the batch queries (canopy.query:batch,
 // packets of 8 coherent rays) instead, and prints how many packets and single rays they traced, with
-// the tests per packet (one box or triangle test for its 8 lanes) and per single ray.
+// the tests per packet (one box or triangle test for its 8 lanes) and per single ray, and the
+// packets' occupancy (canopy.bvh:traverse, packet_occupancy) on which the adaptive policy decides;
+// --packets-always makes every coherent group a packet (batch_packing::always). --compare-packing
+// first times single rays, the batch with packets always and the adaptive batch in turn, P rounds,
+// and prints the medians.
 #include <algorithm>
 #include <chrono>
 #include <span>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -45,26 +50,50 @@ template <typename Isect>
 
 template <typename Isect>
 [[gnu::noinline]] std::size_t trace_batch(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest,
-                                          Isect& isect, std::vector<canopy::basic_hit_record<float>>& out) {
-    canopy_trace_batch(s, rays, closest, isect, out);
+                                          Isect& isect, std::vector<canopy::basic_hit_record<float>>& out,
+                                          canopy::batch_packing packing) {
+    canopy_trace_batch(s, rays, closest, isect, out, packing);
     return std::size_t(std::count_if(out.begin(), out.end(), [](auto const& hr) { return bool(hr.hit); }));
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L] [--batch]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]\n",
                  program);
     return 2;
 }
 
 template <typename Isect>
-int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest, int passes, bool batch) {
+int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closest, int passes, bool batch,
+        canopy::batch_packing packing, bool compare_modes) {
     Isect isect;
     std::size_t hits = 0;
     double seconds = 1e30;
     std::vector<canopy::basic_hit_record<float>> records(rays.size());
+    if (compare_modes) {
+        // Single rays, batch with every coherent group a packet, batch adaptive: one pass of each in
+        // turn, medians over the rounds.
+        std::vector<double> times[3];
+        for (int p = 0; p < passes; ++p) {
+            for (int mode = 0; mode < 3; ++mode) {
+                auto const start = std::chrono::steady_clock::now();
+                if (mode == 0) trace_rays(s, rays, closest, isect, records);
+                else trace_batch(s, rays, closest, isect, records,
+                                 mode == 1 ? canopy::batch_packing::always : canopy::batch_packing::adaptive);
+                times[mode].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+            }
+        }
+        double median[3];
+        for (int mode = 0; mode < 3; ++mode) {
+            std::sort(times[mode].begin(), times[mode].end());
+            median[mode] = times[mode][times[mode].size() / 2] * 1e9 / double(rays.size());
+        }
+        std::printf("medians of %d rounds, ns/ray: single %.1f, batch always %.1f, batch adaptive %.1f; "
+                    "single/always %.3f, single/adaptive %.3f\n",
+                    passes, median[0], median[1], median[2], median[0] / median[1], median[0] / median[2]);
+    }
     for (int p = 0; p < passes; ++p) {
         auto const start = std::chrono::steady_clock::now();
-        hits = batch ? trace_batch(s, rays, closest, isect, records) : trace_rays(s, rays, closest, isect, records);
+        hits = batch ? trace_batch(s, rays, closest, isect, records, packing) : trace_rays(s, rays, closest, isect, records);
         seconds = std::min(seconds, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     }
     counting_intersector<Isect> counter;
@@ -73,9 +102,19 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
     std::printf("rays %zu, hits %zu, %.1f ns/ray, %.2f box tests/ray, %.2f triangle tests/ray\n", rays.size(), hits,
                 seconds * 1e9 / n, double(counter.boxes) / n, double(counter.triangles) / n);
     if (batch) {
+        canopy::detail::packet_occupancy_tally = {};
+        auto const traced = canopy_trace_batch(s, rays, closest, isect, records, packing);
+        auto const o = canopy::detail::packet_occupancy_tally;
+        auto const per = [](std::uint64_t a, std::uint64_t b) { return double(a) / double(std::max<std::uint64_t>(1, b)); };
+        std::printf("packet occupancy: %.2f node visits and %.2f leaf visits per packet, %.2f lanes per node visit, "
+                    "%.2f per leaf visit, %.2f lanes alone per packet; %zu packets, %zu rays of coherent groups "
+                    "traced one by one\n",
+                    per(o.node_visits, traced.packets), per(o.leaf_visits, traced.packets), per(o.node_lanes, o.node_visits),
+                    per(o.leaf_lanes, o.leaf_visits), per(o.lanes_alone, traced.packets), traced.packets,
+                    traced.unpacked_rays);
         counting_intersector<Isect> packed;
         std::vector<canopy::basic_hit_record<float>> out(rays.size());
-        auto const stats = canopy_trace_batch(s, rays, closest, packed, out);
+        auto const stats = canopy_trace_batch(s, rays, closest, packed, out, packing);
         double const p = double(stats.packets);
         std::printf("batch: %zu packets of 8, %zu single rays; per packet %.2f box tests, %.2f triangle tests; "
                     "per single ray %.2f box tests, %.2f triangle tests\n",
@@ -92,9 +131,10 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
 int main(int argc, char** argv) {
     if (argc < 4) return usage(argv[0]);
     std::string const scene_name = argv[1], set_name = argv[2], query = argv[3];
-    bool quick = false, alpha = false, alpha_hook = false, batch = false;
+    bool quick = false, alpha = false, alpha_hook = false, batch = false, compare_modes = false;
     std::size_t count = 0;
     int passes = 1;
+    canopy::batch_packing packing = canopy::batch_packing::adaptive;
     canopy::bvh_build_options options;
     for (int i = 4; i < argc; ++i) {
         std::string const a = argv[i];
@@ -102,6 +142,8 @@ int main(int argc, char** argv) {
         else if (a == "--alpha") alpha = true;
         else if (a == "--alpha-hook") alpha_hook = true;
         else if (a == "--batch") batch = true;
+        else if (a == "--packets-always") packing = canopy::batch_packing::always;
+        else if (a == "--compare-packing") compare_modes = true;
         else if (a == "--count" && i + 1 < argc) count = std::size_t(std::atoll(argv[++i]));
         else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
         else if (a == "--quality" && i + 1 < argc) {
@@ -141,9 +183,9 @@ int main(int argc, char** argv) {
         if (set.name != set_name) continue;
         if (count != 0 && count < set.rays.size()) set.rays.resize(count);
         bool const closest = query == "closest";
-        if (alpha) return run<canopy::bench_alpha_intersector>(*s, set.rays, closest, passes, batch);
-        if (alpha_hook) return run<canopy::bench_alpha_hook_intersector>(*s, set.rays, closest, passes, batch);
-        return run<canopy::default_intersector>(*s, set.rays, closest, passes, batch);
+        if (alpha) return run<canopy::bench_alpha_intersector>(*s, set.rays, closest, passes, batch, packing, compare_modes);
+        if (alpha_hook) return run<canopy::bench_alpha_hook_intersector>(*s, set.rays, closest, passes, batch, packing, compare_modes);
+        return run<canopy::default_intersector>(*s, set.rays, closest, passes, batch, packing, compare_modes);
     }
     return usage(argv[0]);
 }

@@ -211,15 +211,19 @@ struct compiled_scene {
     }
 
     // The batch queries (canopy.query:batch): out[i] as closest_hit(rays[i], isect) and
-    // any_hit(rays[i], isect).hit would give, bit for bit; coherent runs of rays traced as packets.
+    // any_hit(rays[i], isect).hit would give, bit for bit; coherent runs of rays traced as packets
+    // (while they pay, unless `packing` says always).
     template <typename I>
-    inline batch_stats closest_hit(std::span<ray const> rays, std::span<basic_hit_record<float>> out, I& isect) const {
-        return visit_root([&](auto const& root) { return canopy::closest_hit(rays, &root, &root + 1, out, isect); });
+    inline batch_stats closest_hit(std::span<ray const> rays, std::span<basic_hit_record<float>> out, I& isect,
+                                   batch_packing packing = batch_packing::adaptive) const {
+        return visit_root(
+            [&](auto const& root) { return canopy::closest_hit(rays, &root, &root + 1, out, isect, packing); });
     }
 
     template <typename I>
-    inline batch_stats any_hit(std::span<ray const> rays, std::span<bool> out, I& isect) const {
-        return visit_root([&](auto const& root) { return canopy::any_hit(rays, &root, &root + 1, out, isect); });
+    inline batch_stats any_hit(std::span<ray const> rays, std::span<bool> out, I& isect,
+                               batch_packing packing = batch_packing::adaptive) const {
+        return visit_root([&](auto const& root) { return canopy::any_hit(rays, &root, &root + 1, out, isect, packing); });
     }
 
     // The user id of the instance a hit lies in: the innermost placement made by an instance node

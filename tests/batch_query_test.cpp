@@ -159,31 +159,42 @@ struct tally {
 };
 
 // Every batch query of `rays` against the single-ray queries, with intersector `isect` (one
-// fresh copy per query kind and path).
+// fresh copy per query kind and path): closest_hit and any_hit with every coherent group a packet
+// (batch_packing::always: the packets counted in `t`), then again with the adaptive policy.
 template <typename It, typename I>
 void compare(std::vector<ray> const& rays, It first, It last, I const& isect, tally& t) {
-    std::vector<record> out(rays.size());
+    using canopy::batch_packing;
+    std::vector<record> single_closest, single_any;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        auto b = isect;
+        single_closest.push_back(canopy::closest_hit(rays[i], first, last, b));
+        t.hits += single_closest.back().hit;
+        b = isect;
+        single_any.push_back(canopy::any_hit(rays[i], first, last, b));
+    }
+    for (auto packing : {batch_packing::always, batch_packing::adaptive}) {
+        std::vector<record> out(rays.size());
+        auto a = isect;
+        auto const stats = canopy::closest_hit(rays, first, last, out, a, packing);
+        if (packing == batch_packing::always) {
+            t.add(stats);
+            t.mismatches += stats.unpacked_rays != 0;
+        }
+        for (std::size_t i = 0; i < rays.size(); ++i) t.mismatches += !identical(out[i], single_closest[i]);
+        std::vector<record> any(rays.size());
+        a = isect;
+        auto const any_stats = canopy::any_hit(rays, first, last, any, a, packing);
+        if (packing == batch_packing::always) t.add(any_stats);
+        std::unique_ptr<bool[]> occluded(new bool[rays.size() + 1]);
+        auto c = isect;
+        canopy::any_hit(rays, first, last, std::span<bool>(occluded.get(), rays.size()), c, packing);
+        for (std::size_t i = 0; i < rays.size(); ++i) {
+            t.mismatches += !identical(any[i], single_any[i]);
+            t.mismatches += occluded[i] != single_any[i].hit;
+        }
+    }
     auto a = isect, b = isect;
-    t.add(canopy::closest_hit(rays, first, last, out, a));
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-        auto const s = canopy::closest_hit(rays[i], first, last, b);
-        t.hits += s.hit;
-        t.mismatches += !identical(out[i], s);
-    }
-    std::vector<record> any(rays.size());
-    a = isect;
-    b = isect;
-    t.add(canopy::any_hit(rays, first, last, any, a));
-    std::unique_ptr<bool[]> occluded(new bool[rays.size() + 1]);
-    auto c = isect;
-    canopy::any_hit(rays, first, last, std::span<bool>(occluded.get(), rays.size()), c);
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-        auto const s = canopy::any_hit(rays[i], first, last, b);
-        t.mismatches += !identical(any[i], s);
-        t.mismatches += occluded[i] != s.hit;
-    }
     std::vector<std::array<record, 4>> multi(rays.size());
-    a = isect;
     t.add(canopy::multi_hit<4>(rays, first, last, std::span<std::array<record, 4>>(multi), a));
     for (std::size_t i = 0; i < rays.size(); ++i) {
         auto const s = canopy::multi_hit<4>(rays[i], first, last, b);
@@ -381,4 +392,63 @@ TEST_CASE("packets down to one or two lanes continue as single rays with the sin
     check(s.mesh.bounds(), &s.mesh, &s.mesh + 1);
     check(s.nested.top.bounds(), &s.nested.top, &s.nested.top + 1);
     check(s.nested.middle.bounds(), s.nested.level1.begin(), s.nested.level1.end());
+}
+
+TEST_CASE("adaptive packing keeps packets where their lanes stay together and traces single rays where they part") {
+    // The same camera over a few large triangles (a packet's lanes reach the same nodes) and over
+    // 60,000 small ones (8 neighbouring rays part near the root). The adaptive policy measures the
+    // packets' lanes per node visit (canopy.bvh:traverse, packet_occupancy) and unpacks only the
+    // second; the results are the single rays' either way, and the choices the same on every run.
+    using canopy::batch_packing;
+    random_source rng(1408);
+    auto const coarse_soup = triangle_soup(rng, 200, 8.0f, 4.0f);
+    auto const fine_soup = triangle_soup(rng, 60000, 8.0f, 0.05f);
+    mesh_bvh const coarse = canopy::build_binned_sah(coarse_soup);
+    mesh_bvh const fine = canopy::build_binned_sah(fine_soup);
+    auto const rays = camera_rays(coarse.bounds(), 64, 48);
+
+    // The lanes per node visit of every coherent group traced as a packet, in quarters of a lane.
+    auto occupancy_quarters = [&](mesh_bvh const& b) {
+        std::vector<record> out(rays.size());
+        canopy::detail::packet_occupancy_tally = {};
+        canopy::closest_hit(rays, &b, &b + 1, out, canopy::default_intersector{}, batch_packing::always);
+        auto const o = canopy::detail::packet_occupancy_tally;
+        REQUIRE(o.node_visits > 0);
+        return double(4 * o.node_lanes) / double(o.node_visits);
+    };
+    CHECK(occupancy_quarters(coarse) >= double(canopy::batch_paying_occupancy_quarters));
+    CHECK(occupancy_quarters(fine) < double(canopy::batch_paying_occupancy_quarters));
+
+    auto check = [&](mesh_bvh const& b, auto const& isect, bool expect_unpacked) {
+        std::vector<record> single(rays.size());
+        for (std::size_t i = 0; i < rays.size(); ++i) single[i] = canopy::closest_hit(rays[i], &b, &b + 1, isect);
+        std::vector<record> always(rays.size()), adaptive(rays.size()), again(rays.size());
+        auto const s_always = canopy::closest_hit(rays, &b, &b + 1, always, isect, batch_packing::always);
+        auto const s_adaptive = canopy::closest_hit(rays, &b, &b + 1, adaptive, isect);
+        auto const s_again = canopy::closest_hit(rays, &b, &b + 1, again, isect, batch_packing::adaptive);
+        std::size_t mismatches = 0;
+        for (std::size_t i = 0; i < rays.size(); ++i)
+            mismatches += !identical(always[i], single[i]) + !identical(adaptive[i], single[i]) + !identical(again[i], single[i]);
+        CHECK(mismatches == 0);
+        // Coherent groups: all but those whose rays change octant in the image's middle.
+        std::size_t const coherent = s_always.packets * 8;
+        CHECK(coherent + s_always.single_rays == rays.size());
+        CHECK(coherent > rays.size() / 2);
+        CHECK(s_always.unpacked_rays == 0);
+        CHECK(s_adaptive.packets * 8 + s_adaptive.unpacked_rays == coherent);
+        CHECK(s_adaptive.single_rays == s_always.single_rays + s_adaptive.unpacked_rays);
+        CHECK(s_again.packets == s_adaptive.packets);
+        CHECK(s_again.unpacked_rays == s_adaptive.unpacked_rays);
+        if (expect_unpacked) {
+            // The first window is packets; then mostly single rays, one window in 16 probing again.
+            CHECK(s_adaptive.packets >= canopy::batch_probe_packets);
+            CHECK(s_adaptive.unpacked_rays > coherent / 2);
+        } else {
+            CHECK(s_adaptive.unpacked_rays == 0);
+        }
+    };
+    check(coarse, canopy::default_intersector{}, false);
+    check(fine, canopy::default_intersector{}, true);
+    // An intersector with a filter sees packets as documented, whatever they cost: never unpacked.
+    check(fine, alpha_filter{}, false);
 }

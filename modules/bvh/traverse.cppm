@@ -80,6 +80,22 @@ struct bvh_storage {
 
 } // namespace canopy
 
+export namespace canopy::detail {
+
+// What the packets traced on one thread met, summed over traversals (canopy.query:batch reads it
+// to tell whether packets pay): wide nodes visited and the lanes that reached them, leaves visited
+// and the lanes that reached them, lanes that went on alone (packet_lanes_alone_below). Counted
+// only by packets of intersectors that intercept nothing (may_trace_lanes_alone); single rays
+// count nothing.
+struct packet_occupancy {
+    std::uint64_t node_visits = 0, node_lanes = 0;
+    std::uint64_t leaf_visits = 0, leaf_lanes = 0;
+    std::uint64_t lanes_alone = 0;
+};
+inline thread_local packet_occupancy packet_occupancy_tally;
+
+} // namespace canopy::detail
+
 namespace canopy::detail {
 
 // The lanes of a packet that reached a node (bit k: lane k hit every box on the way); nothing for
@@ -523,9 +539,27 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
     traversal_stack<S, L> stack;
     traversal_entry<S, L> current{from.child, from.count, from.tnear, {}};
     if constexpr (!std::is_same_v<L, no_lanes>) current.lanes = (1u << simd::simd_width_v<T>) - 1u;
+    // Packets that may trace lanes alone tally their occupancy here, and once per traversal into
+    // packet_occupancy_tally.
+    constexpr bool tally = may_trace_lanes_alone<T, I, Prim, Query>;
+    struct occupancy {
+        std::uint32_t node_visits = 0, node_lanes = 0, leaf_visits = 0, leaf_lanes = 0, lanes_alone = 0;
+        ~occupancy() {
+            if constexpr (tally) {
+                auto& t = packet_occupancy_tally;
+                t.node_visits += node_visits;
+                t.node_lanes += node_lanes;
+                t.leaf_visits += leaf_visits;
+                t.leaf_lanes += leaf_lanes;
+                t.lanes_alone += lanes_alone;
+            }
+        }
+    };
+    [[maybe_unused]] std::conditional_t<tally, occupancy, no_lanes> counts;
     for (;;) {
         if constexpr (may_trace_lanes_alone<T, I, Prim, Query>) {
             if (std::popcount(current.lanes) < packet_lanes_alone_below) {
+                counts.lanes_alone += std::uint32_t(std::popcount(current.lanes));
                 if (traverse_lanes_alone(ray, b, isect, query, current)) return true;
                 nodes.tmax_changed();
                 if (!stack.pop_nearer_than(nodes.box_tmax(), current)) return false;
@@ -534,6 +568,10 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
         }
         if (current.count == 0) {
             auto const& node = b.wide_nodes[current.child];
+            if constexpr (tally) {
+                ++counts.node_visits;
+                counts.node_lanes += std::uint32_t(std::popcount(current.lanes));
+            }
             auto const hits = nodes.test(node, current.lanes);
             if (hits.mask != 0) {
                 current = order_children<Query::wants_near_first>(b, node, hits, stack);
@@ -545,6 +583,10 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
         } else {
             // Lanes that did not reach the leaf take no part in it (tmax −inf: every test misses),
             // as they would not alone.
+            if constexpr (tally) {
+                ++counts.leaf_visits;
+                counts.leaf_lanes += std::uint32_t(std::popcount(current.lanes));
+            }
             auto const outside = !simd::mask_type_t<T>::from_bits(current.lanes);
             T const saved = ray.tmax;
             ray.tmax = simd::select(outside, T(-std::numeric_limits<simd::scalar_type_t<T>>::infinity()), ray.tmax);

@@ -17,6 +17,22 @@
 //   neighbouring pixels: close origins).
 // The test reads the 8 rays once: it costs far less than tracing them.
 //
+// Whether packets pay is then measured, not guessed (batch_packing::adaptive, the default). On
+// large meshes seen from afar the lanes of a packet part early, and a packet costs more than its
+// rays traced one by one (a packet tests one child box or one triangle at a time against its
+// lanes, a single ray eight boxes or eight triangles at once). Packets of an intersector that
+// intercepts nothing count, as they go, the lanes that reach each wide node they visit
+// (canopy.bvh:traverse, packet_occupancy). After every batch_probe_packets packets the batch
+// looks at the window's mean: below batch_paying_occupancy lanes per node visit, the next
+// batch_skip_groups coherent groups are traced one ray at a time, then packets are probed again.
+// The counts depend only on the rays and the scene, never on timing: a batch makes the same
+// choices on every run. Measured (canopy_bench_profile --batch, docs/performance.md): packets
+// that pay average 7.1–7.3 lanes per node visit (CAD model, bunny), packets that lose 5.8–6.5
+// (1M-triangle sphere, 2M terrain, soup); windows vary around those means, and a threshold of 6.5
+// already unpacked windows where packets pay, hence 6. The signal is coarse: the forest's packets
+// lose on primary closest hits at 7.25 lanes per visit. batch_packing::always keeps every
+// coherent group a packet.
+//
 // How a packet is traced (canopy.bvh:traverse): its node test takes one child box at a time
 // against all lanes; its leaf test one triangle at a time, read straight from the leaf's block,
 // with the vertex components picked once for all lanes when they share one shear permutation
@@ -43,7 +59,8 @@
 //   so do structures whose boxes are not float. A template hook with a deduced return type
 //   (`auto`) is taken to serve packets: its body must compile for them (lane by lane: hr.hit[k],
 //   hr.hit.set(k, ...)), as for the packet single-ray queries.
-// Each query returns batch_stats: how many packets and single rays it traced.
+// Each query returns batch_stats: how many packets and single rays it traced, and how many of the
+// single rays were coherent groups that the adaptive policy traced one by one.
 module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
@@ -62,11 +79,24 @@ import :single;
 
 export namespace canopy {
 
-// What a batch query traced: packets of 8 rays, and rays one at a time.
+// What a batch query traced: packets of 8 rays, and rays one at a time (among them, unpacked_rays:
+// the rays of coherent groups traced one at a time because packets did not pay there).
 struct batch_stats {
     std::size_t packets = 0;
     std::size_t single_rays = 0;
+    std::size_t unpacked_rays = 0;
 };
+
+// Whether coherent groups of rays become packets always, or only while packets pay (see the top
+// of this file).
+enum class batch_packing { adaptive, always };
+
+// The adaptive policy (see the top of this file): packets per measured window; the lanes per node
+// visit, in quarters, from which packets pay (24/4 = 6 of 8); the coherent groups traced one
+// ray at a time after a window that did not pay (then one window in 16 probes packets again).
+inline constexpr std::size_t batch_probe_packets = 16;
+inline constexpr std::uint64_t batch_paying_occupancy_quarters = 24;
+inline constexpr std::size_t batch_skip_groups = 15 * batch_probe_packets;
 
 // The largest origin spread of a packet, as a fraction of the largest side of the scene's bounds.
 inline constexpr float batch_origin_spread = 1.0f / 64.0f;
@@ -77,6 +107,15 @@ namespace canopy::detail {
 
 inline constexpr std::size_t batch_width = 8;
 using batch_packet = basic_ray<simd::float8>;
+
+// Whether the packets traced between two readings of packet_occupancy_tally paid: true when they
+// counted no node visit (a structure without wide nodes, or an intersector whose packets do not
+// count: they stay packets).
+inline bool packets_paid(packet_occupancy const& before, packet_occupancy const& after) {
+    std::uint64_t const visits = after.node_visits - before.node_visits;
+    std::uint64_t const lanes = after.node_lanes - before.node_lanes;
+    return 4 * lanes >= batch_paying_occupancy_quarters * visits;
+}
 
 // Whether packets of I over a range of Elem make the same calls as single rays would: the packet
 // query compiles without mistakes, every hook and filter the single rays would call has a packet
@@ -151,10 +190,12 @@ inline void check_batch_sizes(std::size_t rays, std::size_t results) {
     if (results < rays) throw std::invalid_argument("canopy: a batch query needs one result per ray");
 }
 
-// The batch loop: groups of 8 coherent rays go to packet(index, packet ray), every other ray to
-// single(index). packet is generic, so that it is only instantiated where packets are traced.
+// The batch loop: groups of 8 coherent rays go to packet(index, packet ray) while packets pay
+// (always with batch_packing::always), every other ray to single(index). packet is generic, so
+// that it is only instantiated where packets are traced.
 template <typename I, typename It, typename Packet, typename Single>
-batch_stats run_batch(std::span<ray const> rays, It first, It last, Packet&& packet, Single&& single) {
+batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packing packing, Packet&& packet,
+                      Single&& single) {
     using Elem = std::remove_cvref_t<decltype(*first)>;
     batch_stats stats;
     auto const one = [&](std::size_t k) {
@@ -165,13 +206,31 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, Packet&& pac
     if constexpr (batch_takes_packets<I, Elem>()) {
         if (rays.size() >= batch_width) {
             float const limit = batch_spread_limit(first, last);
+            bool const adaptive = packing == batch_packing::adaptive;
+            std::size_t probe_left = batch_probe_packets, skip_left = 0;
+            packet_occupancy window_start = packet_occupancy_tally;
             for (; i + batch_width <= rays.size(); i += batch_width) {
                 auto const group = rays.subspan(i, batch_width);
-                if (coherent_group(group, limit)) {
+                if (!coherent_group(group, limit)) {
+                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
+                } else if (skip_left > 0) {
+                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
+                    stats.unpacked_rays += batch_width;
+                    if (--skip_left == 0) {
+                        probe_left = batch_probe_packets;
+                        window_start = packet_occupancy_tally;
+                    }
+                } else {
                     packet(i, pack_group(group));
                     ++stats.packets;
-                } else {
-                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
+                    if (adaptive && --probe_left == 0) {
+                        if (!packets_paid(window_start, packet_occupancy_tally)) {
+                            skip_left = batch_skip_groups;
+                        } else {
+                            probe_left = batch_probe_packets;
+                            window_start = packet_occupancy_tally;
+                        }
+                    }
                 }
             }
         }
@@ -185,12 +244,14 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, Packet&& pac
 export namespace canopy {
 
 // Closest hit of every ray: out[i] is what closest_hit(rays[i], first, last, isect) returns.
+// `packing`: packets while they pay (adaptive) or for every coherent group (always); the results
+// are the same either way.
 template <traceable_iterator It, typename I = default_intersector>
 batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<basic_hit_record<float>> out,
-                        I&& isect = I{}) {
+                        I&& isect = I{}, batch_packing packing = batch_packing::adaptive) {
     detail::check_batch_sizes(rays.size(), out.size());
     return detail::run_batch<std::remove_reference_t<I>>(
-        rays, first, last,
+        rays, first, last, packing,
         [&](std::size_t i, auto const& p) {
             auto const hr = closest_hit(p, first, last, isect);
             for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = record_lane(hr, k);
@@ -201,10 +262,10 @@ batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<
 // Any hit of every ray: out[i] is what any_hit(rays[i], first, last, isect) returns.
 template <traceable_iterator It, typename I = default_intersector>
 batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basic_hit_record<float>> out,
-                    I&& isect = I{}) {
+                    I&& isect = I{}, batch_packing packing = batch_packing::adaptive) {
     detail::check_batch_sizes(rays.size(), out.size());
     return detail::run_batch<std::remove_reference_t<I>>(
-        rays, first, last,
+        rays, first, last, packing,
         [&](std::size_t i, auto const& p) {
             auto const hr = any_hit(p, first, last, isect);
             for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = record_lane(hr, k);
@@ -214,10 +275,11 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basi
 
 // Occlusion of every ray: out[i] is any_hit(rays[i], first, last, isect).hit.
 template <traceable_iterator It, typename I = default_intersector>
-batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<bool> out, I&& isect = I{}) {
+batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<bool> out, I&& isect = I{},
+                    batch_packing packing = batch_packing::adaptive) {
     detail::check_batch_sizes(rays.size(), out.size());
     return detail::run_batch<std::remove_reference_t<I>>(
-        rays, first, last,
+        rays, first, last, packing,
         [&](std::size_t i, auto const& p) {
             auto const hr = any_hit(p, first, last, isect);
             for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = hr.hit[k];
