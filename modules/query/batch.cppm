@@ -117,6 +117,41 @@ inline bool packets_paid(packet_occupancy const& before, packet_occupancy const&
     return 4 * lanes >= batch_paying_occupancy_quarters * visits;
 }
 
+// The adaptive policy's state over one batch (see the top of this file): a window of
+// batch_probe_packets packets, measured from packet_occupancy_tally, then batch_skip_groups
+// coherent groups traced one ray at a time when the window did not pay. With batch_packing::always
+// every coherent group is a packet.
+class packing_policy {
+public:
+    explicit packing_policy(batch_packing packing) : adaptive_(packing == batch_packing::adaptive) { open_window(); }
+
+    // Whether the next coherent group is traced as a packet (false while groups are skipped; the
+    // last skipped group opens a new window).
+    bool packs_next() {
+        if (skip_left_ == 0) return true;
+        if (--skip_left_ == 0) open_window();
+        return false;
+    }
+    // Called after each packet: a full window either opens the next or starts the skip.
+    void packet_traced() {
+        if (!adaptive_ || --probe_left_ != 0) return;
+        if (packets_paid(window_start_, packet_occupancy_tally))
+            open_window();
+        else
+            skip_left_ = batch_skip_groups;
+    }
+
+private:
+    void open_window() {
+        probe_left_ = batch_probe_packets;
+        window_start_ = packet_occupancy_tally;
+    }
+
+    bool adaptive_;
+    std::size_t probe_left_ = 0, skip_left_ = 0;
+    packet_occupancy window_start_;
+};
+
 // Whether packets of I over a range of Elem make the same calls as single rays would: the packet
 // query compiles without mistakes, every hook and filter the single rays would call has a packet
 // overload, and the structure's boxes are float.
@@ -206,31 +241,17 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
     if constexpr (batch_takes_packets<I, Elem>()) {
         if (rays.size() >= batch_width) {
             float const limit = batch_spread_limit(first, last);
-            bool const adaptive = packing == batch_packing::adaptive;
-            std::size_t probe_left = batch_probe_packets, skip_left = 0;
-            packet_occupancy window_start = packet_occupancy_tally;
+            packing_policy policy(packing);
             for (; i + batch_width <= rays.size(); i += batch_width) {
                 auto const group = rays.subspan(i, batch_width);
-                if (!coherent_group(group, limit)) {
-                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
-                } else if (skip_left > 0) {
-                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
-                    stats.unpacked_rays += batch_width;
-                    if (--skip_left == 0) {
-                        probe_left = batch_probe_packets;
-                        window_start = packet_occupancy_tally;
-                    }
-                } else {
+                bool const coherent = coherent_group(group, limit);
+                if (coherent && policy.packs_next()) {
                     packet(i, pack_group(group));
                     ++stats.packets;
-                    if (adaptive && --probe_left == 0) {
-                        if (!packets_paid(window_start, packet_occupancy_tally)) {
-                            skip_left = batch_skip_groups;
-                        } else {
-                            probe_left = batch_probe_packets;
-                            window_start = packet_occupancy_tally;
-                        }
-                    }
+                    policy.packet_traced();
+                } else {
+                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
+                    if (coherent) stats.unpacked_rays += batch_width;
                 }
             }
         }
