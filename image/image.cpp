@@ -1,9 +1,11 @@
-// Implementation of canopy.image on OpenImageIO 2.4: the one reading path (read_into) and the writer.
+// Implementation of canopy.image: the one reading path (read_into) and the writer, on OpenImageIO
+// through its backend (oiio_backend.hpp), loaded on first use.
 module;
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -16,8 +18,8 @@ module;
 #include <string_view>
 #include <utility>
 #include <vector>
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
+#include <dlfcn.h>
+#include "oiio_backend.hpp"
 module canopy.image;
 import canopy.render;
 import canopy.scene;
@@ -29,6 +31,41 @@ namespace {
 [[noreturn]] void fail(std::filesystem::path const& path, std::string const& what) {
     throw scene_error(path.string(), "", what);
 }
+
+// The OpenImageIO backend, loaded once (thread-safe), from CANOPY_IMAGE_BACKEND when set, else
+// from where the build put it (CANOPY_IMAGE_BACKEND_PATH); `path` names the image in the error
+// when it cannot be loaded.
+canopy_image_backend const& backend(std::filesystem::path const& path) {
+    static std::string problem;
+    static canopy_image_backend const* const loaded = []() -> canopy_image_backend const* {
+        char const* from_environment = std::getenv("CANOPY_IMAGE_BACKEND");
+        std::string const file = from_environment != nullptr && *from_environment != '\0' ? from_environment
+                                                                                          : CANOPY_IMAGE_BACKEND_PATH;
+        void* const handle = dlopen(file.c_str(), RTLD_NOW | RTLD_LOCAL);
+        if (handle == nullptr) {
+            char const* const why = dlerror();
+            problem = "image support is unavailable: cannot load its OpenImageIO backend (" +
+                      std::string(why != nullptr ? why : file) + ")";
+            return nullptr;
+        }
+        auto const entry = reinterpret_cast<canopy_image_backend_entry>(dlsym(handle, "canopy_image_backend_v1"));
+        canopy_image_backend const* const b = entry != nullptr ? entry() : nullptr;
+        if (b == nullptr || b->version != canopy_image_backend_version) {
+            problem = "image support is unavailable: " + file + " is not a canopy image backend of version " +
+                      std::to_string(canopy_image_backend_version);
+            return nullptr;
+        }
+        return b; // never unloaded: OpenImageIO keeps threads and static state
+    }();
+    if (loaded == nullptr) fail(path, problem);
+    return *loaded;
+}
+
+// A message of the backend (error_buffer), as reason() below takes it.
+struct error_buffer {
+    char text[512] = {};
+    std::string str() const { return std::string(text); }
+};
 
 // OpenImageIO's message, on one line and at most a few hundred characters.
 std::string reason(std::string message) {
@@ -123,16 +160,25 @@ void read_into(std::filesystem::path const& path, image_read_limits const& limit
     for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
     if (auto const dims = size_before_open(path, extension)) check_texels(path, dims->first, dims->second, limits);
     if (png_without_end(path, size)) fail(path, "PNG file without its IEND chunk at the end (truncated?)");
-    auto in = extension.empty() ? nullptr : OIIO::ImageInput::create(extension, false);
-    if (!in) fail(path, "no image reader for this file type (" + (extension.empty() ? std::string("no extension") : "'." + extension + "'") + ")");
-    OIIO::ImageSpec spec;
-    if (!in->open(path.string(), spec)) fail(path, "cannot read image: " + reason(in->geterror()));
+    std::string const problem_type =
+        "no image reader for this file type (" + (extension.empty() ? std::string("no extension") : "'." + extension + "'") + ")";
+    if (extension.empty()) fail(path, problem_type);
+    canopy_image_backend const& io = backend(path);
+    canopy_image_header spec{};
+    error_buffer error;
+    int stage = 0;
+    std::unique_ptr<void, void (*)(void*)> in(
+        io.open_reader(extension.c_str(), path.c_str(), &spec, &stage, error.text, sizeof error.text), io.close_reader);
+    if (!in) {
+        if (stage == canopy_image_no_codec) fail(path, problem_type);
+        fail(path, "cannot read image: " + reason(error.str()));
+    }
 
     // The header, checked before anything is allocated for the pixels.
     if (spec.deep) fail(path, "deep images are not supported");
     if (spec.depth > 1) fail(path, "volume images are not supported");
     if (spec.width <= 0 || spec.height <= 0) fail(path, "image has no pixels (" + size_text(spec.width, spec.height) + ")");
-    if (spec.nchannels <= 0) fail(path, "image has no channels");
+    if (spec.channels <= 0) fail(path, "image has no channels");
     std::uint64_t const texels = std::uint64_t(spec.width) * std::uint64_t(spec.height);
     check_texels(path, std::uint64_t(spec.width), std::uint64_t(spec.height), limits);
     if (texels > std::numeric_limits<std::size_t>::max() / (4 * sizeof(float)))
@@ -143,17 +189,17 @@ void read_into(std::filesystem::path const& path, image_read_limits const& limit
     image_header header;
     header.width = spec.width;
     header.height = spec.height;
-    bool const integer = spec.format.basetype == OIIO::TypeDesc::UINT8 || spec.format.basetype == OIIO::TypeDesc::UINT16;
-    std::string const space = spec.get_string_attribute("oiio:ColorSpace");
+    bool const integer = spec.integer_data != 0;
+    std::string const space = spec.color_space;
     header.srgb = integer && space != "Linear" && space != "linear";
 
     try {
         float* const pixels = allocate(header);
         // The first four channels at most, each texel 4 floats apart; then grey → RGB and the
         // missing alpha → 1.
-        int const channels = std::min(spec.nchannels, 4);
-        if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, pixels, OIIO::stride_t(4 * sizeof(float))))
-            fail(path, "cannot read pixels: " + reason(in->geterror()));
+        int const channels = std::min(spec.channels, 4);
+        if (io.read_pixels(in.get(), channels, pixels, error.text, sizeof error.text) == 0)
+            fail(path, "cannot read pixels: " + reason(error.str()));
         for (std::size_t i = 0; i < std::size_t(texels); ++i) {
             float* p = pixels + 4 * i;
             if (channels < 3) {
@@ -167,7 +213,6 @@ void read_into(std::filesystem::path const& path, image_read_limits const& limit
     } catch (std::bad_alloc const&) {
         fail(path, "out of memory for an image of " + size_text(spec.width, spec.height) + " texels");
     }
-    in->close();
 }
 
 } // namespace
@@ -208,22 +253,29 @@ void write_image(std::filesystem::path const& path, rgba_image const& image) {
     if (image.width <= 0 || image.height <= 0 ||
         image.pixels.size() != 4 * std::size_t(image.width) * std::size_t(image.height))
         fail(path, "image to write has inconsistent size");
-    auto out = OIIO::ImageOutput::create(path.string());
-    if (!out) fail(path, "no image writer for this file type: " + reason(OIIO::geterror()));
+    canopy_image_backend const& io = backend(path);
     std::string const ext = path.extension().string();
     bool const eight_bit = ext == ".png" || ext == ".jpg" || ext == ".jpeg";
-    OIIO::ImageSpec spec(image.width, image.height, 4, eight_bit ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::FLOAT);
     std::vector<float> clamped(image.pixels);
     if (eight_bit)
         for (float& v : clamped) v = std::clamp(v, 0.0f, 1.0f);
     // Encoded in memory when the format allows (OpenImageIO's file writers do not report a full
     // disk), then written and checked after closing here.
     std::vector<unsigned char> encoded;
-    OIIO::Filesystem::IOVecOutput memory(encoded);
-    bool const in_memory = out->supports("ioproxy") && out->set_ioproxy(&memory);
-    if (!out->open(path.string(), spec)) fail(path, "cannot open for writing: " + reason(out->geterror()));
-    if (!out->write_image(OIIO::TypeDesc::FLOAT, clamped.data())) fail(path, "cannot write: " + reason(out->geterror()));
-    if (!out->close()) fail(path, "cannot finish writing: " + reason(out->geterror()));
+    auto const keep = [](void* context, unsigned char const* data, std::size_t size) {
+        static_cast<std::vector<unsigned char>*>(context)->assign(data, data + size);
+    };
+    error_buffer error;
+    int in_memory = 0, stage = 0;
+    if (io.write_image(path.c_str(), image.width, image.height, eight_bit ? 1 : 0, clamped.data(), &encoded, keep,
+                       &in_memory, &stage, error.text, sizeof error.text) == 0) {
+        switch (stage) {
+        case canopy_image_no_codec: fail(path, "no image writer for this file type: " + reason(error.str()));
+        case canopy_image_open: fail(path, "cannot open for writing: " + reason(error.str()));
+        case canopy_image_pixels: fail(path, "cannot write: " + reason(error.str()));
+        default: fail(path, "cannot finish writing: " + reason(error.str()));
+        }
+    }
     if (!in_memory) return;
     errno = 0;
     std::ofstream file(path, std::ios::binary | std::ios::trunc);

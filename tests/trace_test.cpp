@@ -551,6 +551,48 @@ TEST_CASE("canopy render SCENE writes one image named after the scene") {
     CHECK(image.height == 24);
 }
 
+// OpenImageIO is loaded (through canopy.image's backend) only when an image is read or written:
+// without it, what needs no image works, and what does names the image and the problem.
+TEST_CASE("canopy loads its image backend only to read or write images, and without it render names the image and the problem") {
+    temp_folder const folder("canopy_cli_test");
+    write_obj(folder.path / "mesh.obj", make_mesh());
+    write_inst(folder.path / "lattice.inst", "mesh.obj", make_instances());
+    auto const with_backend = [&](std::string const& backend, std::vector<std::string> const& args) {
+        REQUIRE(::setenv("CANOPY_IMAGE_BACKEND", backend.c_str(), 1) == 0);
+        auto const result = run_canopy(args);
+        ::unsetenv("CANOPY_IMAGE_BACKEND");
+        return result;
+    };
+    std::string const missing = (folder.path / "no_such_backend.so").string();
+    auto const info = with_backend(missing, {"info", (folder.path / "lattice.inst").string()});
+    INFO(info.output);
+    CHECK(info.exit_code == 0);
+    CHECK_THAT(info.output, Catch::Contains("triangles"));
+
+    auto const rendered = with_backend(missing, {"render", (folder.path / "lattice.inst").string(), "-o",
+                                                 folder.path.string(), "--size", "8x6"});
+    INFO(rendered.output);
+    CHECK(rendered.exit_code == 1);
+    CHECK_THAT(rendered.output, Catch::Contains("lattice.png") &&
+                                    Catch::Contains("image support is unavailable: cannot load its OpenImageIO backend") &&
+                                    Catch::Contains("no_such_backend.so"));
+    CHECK_FALSE(fs::exists(folder.path / "lattice.png"));
+
+    // A shared library that is not a backend (the example scene plugin) is named as such.
+    auto const wrong = with_backend(CANOPY_SPIRAL_PLUGIN, {"render", (folder.path / "lattice.inst").string(), "-o",
+                                                           folder.path.string(), "--size", "8x6"});
+    INFO(wrong.output);
+    CHECK(wrong.exit_code == 1);
+    CHECK_THAT(wrong.output, Catch::Contains("is not a canopy image backend of version 1"));
+
+    // And with the backend, the same command writes the image.
+    auto const written = run_canopy({"render", (folder.path / "lattice.inst").string(), "-o", folder.path.string(),
+                                     "--size", "8x6"});
+    INFO(written.output);
+    REQUIRE(written.exit_code == 0);
+    CHECK(canopy::read_image(folder.path / "lattice.png").width == 8);
+}
+
 TEST_CASE("canopy render --mode batch writes the images of --mode single, byte for byte") {
     temp_folder const folder("canopy_cli_test");
     auto const images = [&](std::vector<std::string> args, std::string const& mode,
