@@ -75,6 +75,15 @@ struct light_options {
     vec3<float> point_intensity{50.0f, 50.0f, 50.0f};
 };
 
+// The primary kernel's colour of a surface: ambient, plus the sun's term where the sun reaches it
+// (sunlit: cos_sun > 0 and its shadow ray unoccluded). The one expression of primary_kernel and
+// primary_wave (canopy.render:waves), so that both give the same bits.
+inline vec3<float> primary_colour(surface_sample const& s, light_options const& light, float cos_sun, bool sunlit) {
+    vec3<float> colour = s.albedo * light.ambient;
+    if (sunlit) colour = colour + s.albedo * light.sun_colour * cos_sun;
+    return colour;
+}
+
 // Primary visibility: albedo lit by the sun with hard shadows (shadow rays go through the same
 // intersector, so alpha-masked surfaces cast masked shadows), plus ambient; sky where nothing is hit.
 template <typename Scene, typename I>
@@ -83,12 +92,9 @@ vec4<float> primary_kernel(Scene const& scene, ray const& r, I isect, light_opti
     if (!hit.hit) return vec4<float>(scene.background(r), 1.0f);
     surface_sample const s = scene.surface(hit, r);
     float const cos_sun = dot(s.normal, light.sun_direction);
-    vec3<float> colour = s.albedo * light.ambient;
-    if (cos_sun > 0.0f) {
-        ray const shadow = spawn_ray(s.world_triangle, s.u, s.v, light.sun_direction);
-        if (!scene.any_hit(shadow, isect).hit) colour = colour + s.albedo * light.sun_colour * cos_sun;
-    }
-    return vec4<float>(colour, 1.0f);
+    bool const sunlit =
+        cos_sun > 0.0f && !scene.any_hit(spawn_ray(s.world_triangle, s.u, s.v, light.sun_direction), isect).hit;
+    return vec4<float>(primary_colour(s, light, cos_sun, sunlit), 1.0f);
 }
 
 // Ambient occlusion: fraction of `samples` cosine-weighted rays of length `radius` that escape.

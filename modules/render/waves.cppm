@@ -74,8 +74,9 @@ void primary_wave(Scene const& scene, std::span<ray const> rays, I& isect, std::
             continue;
         }
         surface_sample const& s = surfaces[i] = scene.surface(hits[i], rays[i]);
-        colours[i] = vec4<float>(s.albedo * light.ambient, 1.0f);
-        if (dot(s.normal, light.sun_direction) > 0.0f) {
+        float const cos_sun = dot(s.normal, light.sun_direction);
+        colours[i] = vec4<float>(primary_colour(s, light, cos_sun, false), 1.0f);
+        if (cos_sun > 0.0f) {
             shadows.push_back(spawn_ray(s.world_triangle, s.u, s.v, light.sun_direction));
             lit.push_back(i);
         }
@@ -87,9 +88,7 @@ void primary_wave(Scene const& scene, std::span<ray const> rays, I& isect, std::
         if (occluded[k]) continue;
         std::size_t const i = lit[k];
         surface_sample const& s = surfaces[i];
-        float const cos_sun = dot(s.normal, light.sun_direction);
-        vec3<float> const colour = s.albedo * light.ambient + s.albedo * light.sun_colour * cos_sun;
-        colours[i] = vec4<float>(colour, 1.0f);
+        colours[i] = vec4<float>(primary_colour(s, light, dot(s.normal, light.sun_direction), true), 1.0f);
     }
 }
 
