@@ -36,29 +36,30 @@ namespace {
 // from where the build put it (CANOPY_IMAGE_BACKEND_PATH); `path` names the image in the error
 // when it cannot be loaded.
 canopy_image_backend const& backend(std::filesystem::path const& path) {
-    static std::string problem;
-    static canopy_image_backend const* const loaded = []() -> canopy_image_backend const* {
+    // The backend, or why there is none.
+    struct loaded_backend {
+        canopy_image_backend const* io = nullptr;
+        std::string problem;
+    };
+    static loaded_backend const loaded = []() -> loaded_backend {
         char const* from_environment = std::getenv("CANOPY_IMAGE_BACKEND");
         std::string const file = from_environment != nullptr && *from_environment != '\0' ? from_environment
                                                                                           : CANOPY_IMAGE_BACKEND_PATH;
         void* const handle = dlopen(file.c_str(), RTLD_NOW | RTLD_LOCAL);
         if (handle == nullptr) {
             char const* const why = dlerror();
-            problem = "image support is unavailable: cannot load its OpenImageIO backend (" +
-                      std::string(why != nullptr ? why : file) + ")";
-            return nullptr;
+            return {nullptr, "image support is unavailable: cannot load its OpenImageIO backend (" +
+                                 std::string(why != nullptr ? why : file) + ")"};
         }
         auto const entry = reinterpret_cast<canopy_image_backend_entry>(dlsym(handle, "canopy_image_backend_v1"));
-        canopy_image_backend const* const b = entry != nullptr ? entry() : nullptr;
-        if (b == nullptr || b->version != canopy_image_backend_version) {
-            problem = "image support is unavailable: " + file + " is not a canopy image backend of version " +
-                      std::to_string(canopy_image_backend_version);
-            return nullptr;
-        }
-        return b; // never unloaded: OpenImageIO keeps threads and static state
+        canopy_image_backend const* const io = entry != nullptr ? entry() : nullptr;
+        if (io == nullptr || io->version != canopy_image_backend_version)
+            return {nullptr, "image support is unavailable: " + file + " is not a canopy image backend of version " +
+                                 std::to_string(canopy_image_backend_version)};
+        return {io, {}}; // never unloaded: OpenImageIO keeps threads and static state
     }();
-    if (loaded == nullptr) fail(path, problem);
-    return *loaded;
+    if (loaded.io == nullptr) fail(path, loaded.problem);
+    return *loaded.io;
 }
 
 // A message of the backend (error_buffer), as reason() below takes it.
@@ -160,9 +161,11 @@ void read_into(std::filesystem::path const& path, image_read_limits const& limit
     for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
     if (auto const dims = size_before_open(path, extension)) check_texels(path, dims->first, dims->second, limits);
     if (png_without_end(path, size)) fail(path, "PNG file without its IEND chunk at the end (truncated?)");
-    std::string const problem_type =
-        "no image reader for this file type (" + (extension.empty() ? std::string("no extension") : "'." + extension + "'") + ")";
-    if (extension.empty()) fail(path, problem_type);
+    auto const no_reader = [&] {
+        fail(path, "no image reader for this file type (" +
+                       (extension.empty() ? std::string("no extension") : "'." + extension + "'") + ")");
+    };
+    if (extension.empty()) no_reader();
     canopy_image_backend const& io = backend(path);
     canopy_image_header spec{};
     error_buffer error;
@@ -170,7 +173,7 @@ void read_into(std::filesystem::path const& path, image_read_limits const& limit
     std::unique_ptr<void, void (*)(void*)> in(
         io.open_reader(extension.c_str(), path.c_str(), &spec, &stage, error.text, sizeof error.text), io.close_reader);
     if (!in) {
-        if (stage == canopy_image_no_codec) fail(path, problem_type);
+        if (stage == canopy_image_no_codec) no_reader();
         fail(path, "cannot read image: " + reason(error.str()));
     }
 
