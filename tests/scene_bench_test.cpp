@@ -25,6 +25,7 @@ import canopy.scene;
 import canopy.procedural;
 import canopy.plugins.bench;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

@@ -25,6 +25,7 @@ import canopy.plugins.oiio;
 import canopy.plugins.gltf;
 import canopy.plugins;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

@@ -22,6 +22,7 @@ import canopy.plugins.obj;
 import canopy.plugins.oiio;
 import canopy.image;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

@@ -19,6 +19,7 @@ import canopy.scene;
 import canopy.plugins.json;
 import canopy.plugins.gltf;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

@@ -31,6 +31,7 @@
 import canopy.scene;
 import canopy.plugins.openmesh;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

@@ -32,6 +32,7 @@ import canopy.plugins.bench;
 import canopy.plugins.obj;
 import canopy.plugins.openmesh;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

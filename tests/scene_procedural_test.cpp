@@ -21,6 +21,7 @@
 import canopy.scene;
 import canopy.plugins.procedural;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

@@ -22,6 +22,7 @@
 import canopy.scene;
 import canopy.procedural;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

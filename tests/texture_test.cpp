@@ -26,6 +26,7 @@ import canopy.scene;
 import canopy.image;
 import canopy.plugins.oiio;
 import canopy.testing;
+import canopy.testing.scene;
 
 namespace {
 

@@ -1,4 +1,4 @@
-// canopy.testing:scene — what the scene and plugin tests share: catching the scene_error that bad
+// canopy.testing.scene — what the scene and plugin tests share: catching the scene_error that bad
 // input must give, setting resource limits for one test, and a reference ray–triangle test.
 module;
 #include <catch2/catch.hpp>
@@ -9,7 +9,7 @@ module;
 #include <optional>
 #include <string>
 #include <string_view>
-export module canopy.testing:scene;
+export module canopy.testing.scene;
 import canopy.scene;
 
 export namespace test_support {

@@ -15,6 +15,7 @@
 #include <string>
 #include <string_view>
 #include <tuple>
+#include <type_traits>
 #include <utility>
 #include <vector>
 #include <unistd.h>
@@ -239,19 +240,25 @@ constexpr std::tuple render_kernels{
                }},
     // Box + triangle tests of each primary ray through counting<I> (I: the costs intersector, the
     // texture alpha mask), as a heat map whose 99th percentile is red. Pixel by pixel: each pixel
-    // counts through its own copy of the counter.
+    // counts through its own copy of the counter. The options allow it with that intersector
+    // alone, so it is compiled for that one.
     kernel_row{"heatmap", "", false,
-               []<typename I>(counting_scene const& scene, render_job const& job, I const& prototype, progress_bar& bar) {
-                   using counter = canopy::counting<I>;
-                   counter costs;
-                   costs.inner = prototype;
-                   canopy::framebuffer fb = render_with(job, costs, [&](canopy::ray const& r, counter& isect,
-                                                                        canopy::pixel_random&) {
-                       scene.closest_hit(r, isect);
-                       return canopy::vec4<float>(float(isect.num_boxes + isect.num_tris), 0, 0, 1);
-                   }, bar);
-                   canopy::heat_map(fb);
-                   return fb;
+               []<typename I>(counting_scene const& scene, render_job const& job, I const& prototype,
+                              progress_bar& bar) -> canopy::framebuffer {
+                   if constexpr (!std::is_same_v<I, canopy::texture_alpha_mask>)
+                       throw std::logic_error("the heat map counts through the costs intersector only");
+                   else {
+                       using counter = canopy::counting<I>;
+                       counter costs;
+                       costs.inner = prototype;
+                       canopy::framebuffer fb = render_with(job, costs, [&](canopy::ray const& r, counter& isect,
+                                                                            canopy::pixel_random&) {
+                           scene.closest_hit(r, isect);
+                           return canopy::vec4<float>(float(isect.num_boxes + isect.num_tris), 0, 0, 1);
+                       }, bar);
+                       canopy::heat_map(fb);
+                       return fb;
+                   }
                }},
 };
 
