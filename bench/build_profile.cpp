@@ -3,9 +3,13 @@
 // whether two builds (two binaries, one and two threads) gave the same tree.
 //
 //   canopy_bench_build SCENE [--quick] [--quality automatic|fast|high] [--split-budget F]
-//                      [--threads T] [--rounds R]
+//                      [--split-overlap F] [--threads T] [--rounds R] [--embree]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers);
 //          the forest builds its tree's mesh
+//   --embree  builds the same mesh with Embree 3 instead (one triangle geometry, committed in
+//             build_embree: fast and automatic → RTC_BUILD_QUALITY_MEDIUM, high → HIGH), so that
+//             callgrind counts both builders the same way (toggle on build_embree); Embree picks
+//             its kernels by the CPU valgrind reports.
 //
 // Builds R times (default 1) with T worker threads (default: all cores) and prints the tree's
 // triangles, references, nodes, depth, SAH cost, a 64-bit fingerprint of its structure (fingerprint),
@@ -20,6 +24,7 @@
 #include <thread>
 #include <vector>
 #include <tbb/global_control.h>
+#include "embree_support.hpp"
 import canopy.bench_tracing;
 
 namespace {
@@ -27,6 +32,20 @@ namespace {
 [[gnu::noinline]] canopy::bvh<canopy::triangle> build_mesh(std::vector<canopy::triangle> const& mesh,
                                                             canopy::bvh_build_options const& options) {
     return canopy::build_binned_sah(std::span<canopy::triangle const>(mesh), options);
+}
+
+// The mesh as an Embree scene, built (rtcCommitScene) at `quality`; the caller releases it.
+[[gnu::noinline]] RTCScene build_embree(RTCDevice device, std::vector<canopy::triangle> const& mesh,
+                                        RTCBuildQuality quality) {
+    RTCScene scene = rtcNewScene(device);
+    RTCGeometry geom = canopy_bench::embree_triangles(device, mesh);
+    rtcSetSceneBuildQuality(scene, quality);
+    rtcSetGeometryBuildQuality(geom, quality);
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(scene, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(scene);
+    return scene;
 }
 
 // FNV-1a over the tree in depth-first order: each node's box and primitive count, each leaf's
@@ -59,7 +78,7 @@ std::uint64_t fingerprint(canopy::bvh<canopy::triangle> const& b) {
 int usage(char const* program) {
     std::fprintf(stderr,
                  "usage: %s SCENE [--quick] [--quality automatic|fast|high] [--split-budget F] [--threads T] "
-                 "[--rounds R]\n",
+                 "[--rounds R] [--split-overlap F] [--embree]\n",
                  program);
     return 2;
 }
@@ -70,7 +89,7 @@ int main(int argc, char** argv) {
     using namespace canopy::bench;
     if (argc < 2) return usage(argv[0]);
     std::string const scene_name = argv[1];
-    bool quick = false;
+    bool quick = false, embree = false;
     int rounds = 1;
     std::size_t threads = std::thread::hardware_concurrency();
     canopy::bvh_build_options options;
@@ -80,6 +99,8 @@ int main(int argc, char** argv) {
         else if (a == "--quality" && i + 1 < argc) {
             if (!parse_quality(argv[++i], options.quality)) return usage(argv[0]);
         } else if (a == "--split-budget" && i + 1 < argc) options.split_budget = float(std::atof(argv[++i]));
+        else if (a == "--split-overlap" && i + 1 < argc) options.split_overlap = float(std::atof(argv[++i]));
+        else if (a == "--embree") embree = true;
         else if (a == "--threads" && i + 1 < argc) threads = std::size_t(std::max(1, std::atoi(argv[++i])));
         else if (a == "--rounds" && i + 1 < argc) rounds = std::max(1, std::atoi(argv[++i]));
         else return usage(argv[0]);
@@ -88,6 +109,25 @@ int main(int argc, char** argv) {
     if (!scene.skipped.empty()) {
         std::fprintf(stderr, "%s: %s\n", scene_name.c_str(), scene.skipped.c_str());
         return 1;
+    }
+    if (embree) {
+        std::string const config = "threads=" + std::to_string(threads);
+        RTCDevice device = rtcNewDevice(config.c_str());
+        if (!device) {
+            std::fprintf(stderr, "Embree: no device (%s)\n", config.c_str());
+            return 1;
+        }
+        bool const high = options.quality == canopy::build_quality::high;
+        for (int r = 0; r < rounds; ++r) {
+            auto const start = std::chrono::steady_clock::now();
+            RTCScene built = build_embree(device, scene.mesh, high ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_MEDIUM);
+            double const ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+            std::printf("%s (Embree %s, %zu threads): %zu triangles, %.1f ms (geometry set-up and build)\n",
+                        scene_name.c_str(), high ? "HIGH" : "MEDIUM", threads, scene.mesh.size(), ms);
+            rtcReleaseScene(built);
+        }
+        rtcReleaseDevice(device);
+        return 0;
     }
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
     for (int r = 0; r < rounds; ++r) {

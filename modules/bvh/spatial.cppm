@@ -159,7 +159,7 @@ struct spatial_scratch {
     explicit spatial_scratch(int bins)
         : object(bins), boxes(3 * std::size_t(bins)), enter(3 * std::size_t(bins)), exit(3 * std::size_t(bins)),
           planes(3 * (std::size_t(bins) + 1)), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)),
-          parts(std::size_t(bins)), vector_boxes(std::size_t(bins)), vector_parts(std::size_t(bins)) {}
+          parts(std::size_t(bins)), vector_boxes(std::size_t(bins)) {}
     bin_scratch<S> object;
     std::vector<basic_aabb<S>> boxes;
     std::vector<std::size_t> enter, exit;
@@ -167,7 +167,7 @@ struct spatial_scratch {
     std::vector<basic_aabb<S>> right_boxes;
     std::vector<std::size_t> right_counts;
     std::vector<basic_aabb<S>> parts; // one reference's parts, bin by bin (bin_reference_parts)
-    std::vector<vector_bin> vector_boxes, vector_parts; // the same with vector_binning
+    std::vector<vector_bin> vector_boxes; // the bins' boxes with vector_binning
     std::vector<prim_ref<S>> left, right;
 };
 
@@ -232,58 +232,76 @@ void bin_reference_parts(basic_triangle<S> const& tri, basic_aabb<S> const& box,
     }
 }
 
-// bin_reference_parts with vector_binning: a point or box in the lanes of one vector (lane 3
-// ignored), the same operations lane by lane (extend and intersection as canopy.math's, the
-// crossing p + d · t), so the bins get the same boxes bit for bit.
+// bin_reference_parts with vector_binning, the same boxes bit for bit, in one sweep along the
+// axis: a point or box in the lanes of one vector (lane 3 ignored), extend and intersection as
+// canopy.math's lane by lane, the crossing p + d · t of an edge from its lower end. With the
+// vertices sorted along the axis (lo, mid, hi), the edges a plane crosses strictly are the long
+// edge lo–hi and one of lo–mid and mid–hi; bin k gets the crossings on its two planes (they are
+// shared with its neighbours: computed once) and the vertices whose bin, clamped to
+// [first, last], is k.
 inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_bin const& box, int axis,
                                        float const* planes, int bins, float scale, int first, int last,
-                                       vector_bin* boxes, vector_bin* parts) {
+                                       vector_bin* boxes) {
     using simd::float4;
     float const inf = std::numeric_limits<float>::infinity();
-    for (int k = first; k <= last; ++k) parts[k] = {float4(inf), float4(-inf)};
+    float4 const lanes[3] = {to_lanes(tri.v0), to_lanes(tri.v1), to_lanes(tri.v2)};
+    float const coord[3] = {tri.v0[axis], tri.v1[axis], tri.v2[axis]};
+    int lo = 0, mid = 1, hi = 2;
+    if (coord[mid] < coord[lo]) std::swap(lo, mid);
+    if (coord[hi] < coord[mid]) std::swap(mid, hi);
+    if (coord[mid] < coord[lo]) std::swap(lo, mid);
+    float const lo_a = coord[lo], mid_a = coord[mid], hi_a = coord[hi];
+    float4 const p_lo = lanes[lo], p_mid = lanes[mid], p_hi = lanes[hi];
+    float4 const d_long = p_hi - p_lo, d_low = p_mid - p_lo, d_high = p_hi - p_mid;
+    // A vertex at or below the reference's lowest coordinate (first = its bin) falls in bin first
+    // or below, one at or above its highest in bin last or above (plane_bin is monotonic): the
+    // search only for the others.
+    float const ref_lo = box.lo[axis], ref_hi = box.hi[axis];
+    auto const vertex_bin = [&](float x) {
+        if (x <= ref_lo) return first;
+        if (x >= ref_hi) return last;
+        return std::clamp(plane_bin(x, planes, bins, scale), first, last);
+    };
+    int const lo_bin = vertex_bin(lo_a), mid_bin = vertex_bin(mid_a), hi_bin = vertex_bin(hi_a);
+    auto const on_axis = float4::iota() == float4(float(axis));
     auto const extend_by = [](vector_bin& b, float4 const& x) {
         b.lo = simd::min(x, b.lo);
         b.hi = simd::max(x, b.hi);
     };
-    vec3<float> const v[3] = {tri.v0, tri.v1, tri.v2};
-    float4 const lanes[3] = {to_lanes(tri.v0), to_lanes(tri.v1), to_lanes(tri.v2)};
-    int vertex_bin[3];
-    for (int i = 0; i < 3; ++i) {
-        vertex_bin[i] = plane_bin(v[i][axis], planes, bins, scale);
-        extend_by(parts[std::clamp(vertex_bin[i], first, last)], lanes[i]);
-    }
-    auto const on_axis = float4::iota() == float4(float(axis));
-    for (int i = 0; i < 3; ++i) {
-        int lower = i, upper = (i + 1) % 3;
-        if (v[upper][axis] < v[lower][axis]) std::swap(lower, upper);
-        float const p_axis = v[lower][axis], q_axis = v[upper][axis];
-        if (!(p_axis < q_axis)) continue;
-        float const run = q_axis - p_axis;
-        float4 const p = lanes[lower], d = lanes[upper] - p;
-        for (int k = std::max(first, vertex_bin[lower]); k < last; ++k) {
-            float const plane = planes[k + 1];
-            if (!(plane < q_axis)) break;
-            if (!(plane > p_axis)) continue;
-            float4 const x = simd::select(on_axis, float4(plane), p + d * float4((plane - p_axis) / run));
-            extend_by(parts[k], x);
-            extend_by(parts[k + 1], x);
-        }
-    }
+    vector_bin part{float4(inf), float4(-inf)}; // bin k's points so far: the crossings on plane k
     for (int k = first; k <= last; ++k) {
-        float4 const lo = simd::max(parts[k].lo, box.lo), hi = simd::min(parts[k].hi, box.hi);
-        if ((simd::movemask(lo > hi) & 7u) != 0) continue;
-        boxes[k].lo = simd::min(lo, boxes[k].lo);
-        boxes[k].hi = simd::max(hi, boxes[k].hi);
+        if (k == lo_bin) extend_by(part, p_lo);
+        if (k == mid_bin) extend_by(part, p_mid);
+        if (k == hi_bin) extend_by(part, p_hi);
+        vector_bin next{float4(inf), float4(-inf)}; // the crossings on plane k + 1
+        if (k < last) {
+            float const plane = planes[k + 1];
+            if (plane > lo_a && plane < hi_a)
+                extend_by(next, simd::select(on_axis, float4(plane), p_lo + d_long * float4((plane - lo_a) / (hi_a - lo_a))));
+            if (plane > lo_a && plane < mid_a)
+                extend_by(next, simd::select(on_axis, float4(plane), p_lo + d_low * float4((plane - lo_a) / (mid_a - lo_a))));
+            else if (plane > mid_a && plane < hi_a)
+                extend_by(next,
+                          simd::select(on_axis, float4(plane), p_mid + d_high * float4((plane - mid_a) / (hi_a - mid_a))));
+            part.lo = simd::min(next.lo, part.lo);
+            part.hi = simd::max(next.hi, part.hi);
+        }
+        float4 const clipped_lo = simd::max(part.lo, box.lo), clipped_hi = simd::min(part.hi, box.hi);
+        if ((simd::movemask(clipped_lo > clipped_hi) & 7u) == 0) {
+            boxes[k].lo = simd::min(clipped_lo, boxes[k].lo);
+            boxes[k].hi = simd::max(clipped_hi, boxes[k].hi);
+        }
+        part = next;
     }
 }
 
 // Adds the spatial bins of refs along `axis` (bins between `planes`) to boxes, enter and exit:
 // each bin's box grows by the parts of the references in it, enter / exit count the references
-// whose first / last bin it is. vector_boxes, vector_parts, parts: `bins` entries of scratch.
+// whose first / last bin it is. vector_boxes, parts: `bins` entries of scratch.
 template <typename Prim, typename S>
 void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> refs, int axis, S const* planes,
                  int bins, S scale, basic_aabb<S>* boxes, std::size_t* enter, std::size_t* exit,
-                 vector_bin* vector_boxes, vector_bin* vector_parts, basic_aabb<S>* parts) {
+                 vector_bin* vector_boxes, basic_aabb<S>* parts) {
     if constexpr (vector_binning<S>) {
         using simd::float4;
         float const inf = std::numeric_limits<float>::infinity();
@@ -300,8 +318,7 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
                 vector_boxes[first].hi = simd::max(box.hi, vector_boxes[first].hi);
                 continue;
             }
-            bin_reference_parts_vector(ctx.prims[r.index], box, axis, planes, bins, scale, first, last, vector_boxes,
-                                       vector_parts);
+            bin_reference_parts_vector(ctx.prims[r.index], box, axis, planes, bins, scale, first, last, vector_boxes);
         }
         for (int k = 0; k < bins; ++k)
             boxes[k] = extend(boxes[k], basic_aabb<S>{from_lanes(vector_boxes[k].lo), from_lanes(vector_boxes[k].hi)});
@@ -350,14 +367,14 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
             std::size_t const at = std::size_t(axis) * b;
             bin_spatial(ctx, refs, axis, scratch.planes.data() + std::size_t(axis) * (b + 1), bins, scale[axis],
                         scratch.boxes.data() + at, scratch.enter.data() + at, scratch.exit.data() + at,
-                        scratch.vector_boxes.data(), scratch.vector_parts.data(), scratch.parts.data());
+                        scratch.vector_boxes.data(), scratch.parts.data());
         }
     } else {
         std::size_t const chunks = (refs.size() + chunk - 1) / chunk;
         std::vector<basic_aabb<S>> boxes(chunks * 3 * b);
         std::vector<std::size_t> enter(chunks * 3 * b), exit(chunks * 3 * b);
         parallel_for_chunks(chunks * 3, 1, [&](std::size_t first, std::size_t last) {
-            std::vector<vector_bin> vector_boxes(b), vector_parts(b);
+            std::vector<vector_bin> vector_boxes(b);
             std::vector<basic_aabb<S>> parts(b);
             for (std::size_t t = first; t < last; ++t) {
                 auto const axis = int(t % 3);
@@ -366,7 +383,7 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
                 bin_spatial(ctx, refs.subspan(begin, std::min(chunk, refs.size() - begin)), axis,
                             scratch.planes.data() + std::size_t(axis) * (b + 1), bins, scale[axis],
                             boxes.data() + t * b, enter.data() + t * b, exit.data() + t * b, vector_boxes.data(),
-                            vector_parts.data(), parts.data());
+                            parts.data());
             }
         });
         for (std::size_t c = 0; c < chunks; ++c)
