@@ -7,7 +7,7 @@
 // each copy with the box of its triangle's part on that side, unless keeping it whole on one side
 // is cheaper by the SAH (Stich et al.'s reference unsplitting). Spatial splits are tried only
 // where the two sides of the best object split overlap by more than split_overlap of the root's
-// surface area, and add at most split_budget × n references in all: each node's share of the
+// surface area and more than split_node_overlap of the node's (Embree's second test), and add at most split_budget × n references in all: each node's share of the
 // budget goes to its children in proportion to their references, so the tree does not depend on
 // how threads are scheduled. The references live in one array with room for each subtree's budget
 // (Embree's extended ranges, spatial_context); a subtree whose budget is spent is built by
@@ -148,7 +148,8 @@ struct spatial_context {
     using S = typename Prim::value_type;
     std::span<Prim const> prims;
     build_context<S> object; // the references, nodes, node and depth counters, options
-    double min_overlap = 0.0; // split_overlap × the root's surface area
+    double min_overlap = 0.0;      // split_overlap × the root's surface area
+    double node_overlap = 0.0;     // split_node_overlap
 };
 
 // Per-task working memory: the object bins, the spatial bins of the three axes (boxes, references
@@ -517,7 +518,8 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
     if (finite && best.axis >= 0) {
         basic_aabb<S> left, right;
         object_side_bounds(scratch.object, binning, best, left, right);
-        if (double(surface_area(intersection(left, right))) > ctx.min_overlap)
+        double const overlap = double(surface_area(intersection(left, right)));
+        if (overlap > ctx.min_overlap && overlap > ctx.node_overlap * double(surface_area(range.bounds)))
             spatial = find_spatial_split(ctx, scratch, refs, range.bounds, opt.bins);
     }
     // A split that would duplicate more references than the budget allows keeps the rest whole
@@ -614,6 +616,7 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     result.build_phases.references = lap(clock);
     double const overlap = std::isfinite(options.split_overlap) ? std::max(0.0, double(options.split_overlap)) : 0.0;
     ctx.min_overlap = overlap * double(surface_area(root));
+    ctx.node_overlap = std::isfinite(options.split_node_overlap) ? std::max(0.0, double(options.split_node_overlap)) : 0.0;
     build_buffer<bvh_node<S>> nodes;
     nodes.resize(2 * (n + budget) - 1); // not zeroed: only the nodes made are written, and copied
     ctx.object.nodes = &nodes;

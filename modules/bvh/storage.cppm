@@ -181,6 +181,9 @@ struct bvh_build_options {
     // high: spatial splits are tried where the two sides of the best object split overlap by more
     // than this fraction of the root's surface area (Stich et al.'s α).
     float split_overlap = 1e-5f;
+    // high: and where that overlap is also more than this fraction of the node's own surface area
+    // (Embree's second test and value; 0: the first test alone).
+    float split_node_overlap = 0.1f;
 };
 
 struct bvh_stats {
