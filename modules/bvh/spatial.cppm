@@ -309,7 +309,8 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
         for (int k = 0; k < bins; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
         for (auto const& r : refs) {
             int const first = plane_bin(r.lo[axis], planes, bins, scale);
-            int const last = plane_bin(r.hi[axis], planes, bins, scale);
+            // Below the next plane, the reference ends in its first bin (plane_bin is monotonic).
+            int const last = r.hi[axis] < planes[first + 1] ? first : plane_bin(r.hi[axis], planes, bins, scale);
             ++enter[first];
             ++exit[last];
             // Lane 3 holds the index or the padding: ignored.

@@ -126,6 +126,14 @@ void tiles(canopy::framebuffer& fb, canopy::tile_shader const& shade, canopy::ti
     canopy::render_tiles(fb, shade, options);
 }
 
+// The camera ray of a sample of pixel (x, y): jittered by the sample's first two random numbers
+// when the job takes several samples per pixel, else through the pixel's centre. render_with and
+// render_waves_with draw their rays here, so that their images agree bit for bit.
+canopy::ray sample_ray(render_job const& job, int x, int y, canopy::pixel_random& rng) {
+    float const jx = job.spp > 1 ? rng.next() : 0.5f, jy = job.spp > 1 ? rng.next() : 0.5f;
+    return job.camera.primary_ray(float(x) + jx, float(y) + jy, job.width, job.height);
+}
+
 // Shades every pixel with kernel(ray, isect, rng) averaged over spp jittered samples.
 template <typename I, typename Kernel>
 canopy::framebuffer render_with(render_job const& job, I const& prototype, Kernel const& kernel, progress_bar& bar) {
@@ -136,9 +144,9 @@ canopy::framebuffer render_with(render_job const& job, I const& prototype, Kerne
             canopy::vec4<float> sum;
             for (int s = 0; s < job.spp; ++s) {
                 canopy::pixel_random rng(1u, x, y, s);
-                float const jx = job.spp > 1 ? rng.next() : 0.5f, jy = job.spp > 1 ? rng.next() : 0.5f;
+                canopy::ray const r = sample_ray(job, x, y, rng);
                 I isect = prototype;
-                sum = sum + kernel(job.camera.primary_ray(float(x) + jx, float(y) + jy, job.width, job.height), isect, rng);
+                sum = sum + kernel(r, isect, rng);
             }
             return sum * (1.0f / float(job.spp));
         }),
@@ -165,9 +173,7 @@ canopy::framebuffer render_waves_with(render_job const& job, I const& prototype,
                 std::size_t i = 0;
                 for (int y = r.y0; y < r.y1; ++y)
                     for (int x = r.x0; x < r.x1; ++x, ++i) {
-                        canopy::pixel_random& rng = rngs.emplace_back(1u, x, y, s);
-                        float const jx = job.spp > 1 ? rng.next() : 0.5f, jy = job.spp > 1 ? rng.next() : 0.5f;
-                        rays[i] = job.camera.primary_ray(float(x) + jx, float(y) + jy, job.width, job.height);
+                        rays[i] = sample_ray(job, x, y, rngs.emplace_back(1u, x, y, s));
                     }
                 I isect = prototype;
                 wave(std::span<canopy::ray const>(rays), std::span(rngs), isect, std::span(colours));
