@@ -7,9 +7,9 @@
 // each copy with the box of its triangle's part on that side, unless keeping it whole on one side
 // is cheaper by the SAH (Stich et al.'s reference unsplitting). Spatial splits are tried only
 // where the two sides of the best object split overlap by more than split_overlap of the root's
-// surface area and more than split_node_overlap of the node's (Embree's second test), and add at most split_budget × n references in all: each node's share of the
-// budget goes to its children in proportion to their references, so the tree does not depend on
-// how threads are scheduled. The references live in one array with room for each subtree's budget
+// surface area and more than split_node_overlap of the node's (Embree's second test), and add at
+// most split_budget × n references in all: each node's share of the budget goes to its children
+// in proportion to their references, so the tree does not depend on how threads are scheduled. The references live in one array with room for each subtree's budget
 // (Embree's extended ranges, spatial_context); a subtree whose budget is spent is built by
 // canopy.bvh:object's build_node in place. Nodes of 4 × parallel_threshold references and more
 // bin their spatial splits in parallel (find_spatial_split), with the same bins.
@@ -269,6 +269,10 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
         b.lo = simd::min(x, b.lo);
         b.hi = simd::max(x, b.hi);
     };
+    // Where the edge from p (coordinate p_a along the axis) by d (to q_a) meets the plane.
+    auto const crossing = [&](float plane, float4 const& p, float4 const& d, float p_a, float q_a) {
+        return simd::select(on_axis, float4(plane), p + d * float4((plane - p_a) / (q_a - p_a)));
+    };
     vector_bin part{float4(inf), float4(-inf)}; // bin k's points so far: the crossings on plane k
     for (int k = first; k <= last; ++k) {
         if (k == lo_bin) extend_by(part, p_lo);
@@ -277,13 +281,9 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
         vector_bin next{float4(inf), float4(-inf)}; // the crossings on plane k + 1
         if (k < last) {
             float const plane = planes[k + 1];
-            if (plane > lo_a && plane < hi_a)
-                extend_by(next, simd::select(on_axis, float4(plane), p_lo + d_long * float4((plane - lo_a) / (hi_a - lo_a))));
-            if (plane > lo_a && plane < mid_a)
-                extend_by(next, simd::select(on_axis, float4(plane), p_lo + d_low * float4((plane - lo_a) / (mid_a - lo_a))));
-            else if (plane > mid_a && plane < hi_a)
-                extend_by(next,
-                          simd::select(on_axis, float4(plane), p_mid + d_high * float4((plane - mid_a) / (hi_a - mid_a))));
+            if (plane > lo_a && plane < hi_a) extend_by(next, crossing(plane, p_lo, d_long, lo_a, hi_a));
+            if (plane > lo_a && plane < mid_a) extend_by(next, crossing(plane, p_lo, d_low, lo_a, mid_a));
+            else if (plane > mid_a && plane < hi_a) extend_by(next, crossing(plane, p_mid, d_high, mid_a, hi_a));
             part.lo = simd::min(next.lo, part.lo);
             part.hi = simd::max(next.hi, part.hi);
         }
@@ -294,6 +294,13 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
         }
         part = next;
     }
+}
+
+// The last bin of a reference whose first bin is `first` and whose highest coordinate is hi: its
+// first bin when hi is below that bin's upper plane (plane_bin is monotonic), without a search.
+template <typename S>
+int last_plane_bin(S hi, int first, S const* planes, int bins, S scale) {
+    return hi < planes[first + 1] ? first : plane_bin(hi, planes, bins, scale);
 }
 
 // Adds the spatial bins of refs along `axis` (bins between `planes`) to boxes, enter and exit:
@@ -309,8 +316,7 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
         for (int k = 0; k < bins; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
         for (auto const& r : refs) {
             int const first = plane_bin(r.lo[axis], planes, bins, scale);
-            // Below the next plane, the reference ends in its first bin (plane_bin is monotonic).
-            int const last = r.hi[axis] < planes[first + 1] ? first : plane_bin(r.hi[axis], planes, bins, scale);
+            int const last = last_plane_bin(r.hi[axis], first, planes, bins, scale);
             ++enter[first];
             ++exit[last];
             // Lane 3 holds the index or the padding: ignored.
@@ -327,7 +333,7 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
     } else {
         for (auto const& r : refs) {
             int const first = plane_bin(r.lo[axis], planes, bins, scale);
-            int const last = plane_bin(r.hi[axis], planes, bins, scale);
+            int const last = last_plane_bin(r.hi[axis], first, planes, bins, scale);
             ++enter[first];
             ++exit[last];
             if (first == last) {
@@ -584,6 +590,10 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
     }
 }
 
+// A fraction among the `high` options (split_budget, split_overlap, split_node_overlap): a
+// negative, NaN or infinite value counts as 0.
+inline double fraction_option(float f) { return std::isfinite(f) ? std::max(0.0, double(f)) : 0.0; }
+
 // The split BVH of prims (options already checked by build_binned_sah; prims not empty).
 template <typename Prim>
     requires splittable_triangle<Prim>
@@ -591,7 +601,7 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     using S = typename Prim::value_type;
     bvh<Prim> result;
     std::size_t const n = prims.size();
-    double const fraction = std::isfinite(options.split_budget) ? std::max(0.0, double(options.split_budget)) : 0.0;
+    double const fraction = fraction_option(options.split_budget);
     // References are numbered in 32 bits, as primitives are.
     auto const budget = std::size_t(std::min(double(n) * fraction, double(std::numeric_limits<std::uint32_t>::max() / 2) - double(n)));
 
@@ -615,9 +625,8 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     basic_aabb<S> root;
     for (std::size_t i = 0; i < n; ++i) root = extend(root, refs[i].box());
     result.build_phases.references = lap(clock);
-    double const overlap = std::isfinite(options.split_overlap) ? std::max(0.0, double(options.split_overlap)) : 0.0;
-    ctx.min_overlap = overlap * double(surface_area(root));
-    ctx.node_overlap = std::isfinite(options.split_node_overlap) ? std::max(0.0, double(options.split_node_overlap)) : 0.0;
+    ctx.min_overlap = fraction_option(options.split_overlap) * double(surface_area(root));
+    ctx.node_overlap = fraction_option(options.split_node_overlap);
     build_buffer<bvh_node<S>> nodes;
     nodes.resize(2 * (n + budget) - 1); // not zeroed: only the nodes made are written, and copied
     ctx.object.nodes = &nodes;
