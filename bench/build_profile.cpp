@@ -3,7 +3,8 @@
 // whether two builds (two binaries, one and two threads) gave the same tree.
 //
 //   canopy_bench_build SCENE [--quick] [--quality automatic|fast|high] [--split-budget F]
-//                      [--split-overlap F] [--split-node-overlap F] [--threads T] [--rounds R] [--embree]
+//                      [--split-overlap F] [--split-node-overlap F] [--parallel-threshold N] [--threads T]
+//                      [--rounds R] [--embree]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers);
 //          the forest builds its tree's mesh
 //   --embree  builds the same mesh with Embree 3 instead (one triangle geometry, committed in
@@ -78,7 +79,7 @@ std::uint64_t fingerprint(canopy::bvh<canopy::triangle> const& b) {
 int usage(char const* program) {
     std::fprintf(stderr,
                  "usage: %s SCENE [--quick] [--quality automatic|fast|high] [--split-budget F] [--threads T] "
-                 "[--rounds R] [--split-overlap F] [--split-node-overlap F] [--embree]\n",
+                 "[--rounds R] [--split-overlap F] [--split-node-overlap F] [--parallel-threshold N] [--embree]\n",
                  program);
     return 2;
 }
@@ -100,6 +101,8 @@ int main(int argc, char** argv) {
             if (!parse_quality(argv[++i], options.quality)) return usage(argv[0]);
         } else if (a == "--split-budget" && i + 1 < argc) options.split_budget = float(std::atof(argv[++i]));
         else if (a == "--split-overlap" && i + 1 < argc) options.split_overlap = float(std::atof(argv[++i]));
+        else if (a == "--parallel-threshold" && i + 1 < argc)
+            options.parallel_threshold = std::size_t(std::max(1L, std::atol(argv[++i])));
         else if (a == "--split-node-overlap" && i + 1 < argc)
             options.split_node_overlap = float(std::atof(argv[++i]));
         else if (a == "--embree") embree = true;

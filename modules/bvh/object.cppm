@@ -51,14 +51,17 @@ struct prim_ref {
     basic_aabb<S> box() const { return {lo, hi}; }
 };
 
+// The counters that every node updates sit on cache lines of their own: written by one thread,
+// they would otherwise evict the line holding the fields every node reads (refs, nodes, options)
+// from the other threads' caches (false sharing).
 template <typename S>
 struct build_context {
     build_buffer<prim_ref<S>> refs;     // sized without being zeroed: filled in parallel
     build_buffer<bvh_node<S>>* nodes = nullptr; // each node written whole by the step creating it
-    std::atomic<std::uint32_t> node_count{1};
-    std::atomic<int> depth{0};
     bvh_build_options options;
     std::size_t block_size = 1; // primitives tested together in a leaf (see leaf_tests)
+    alignas(64) std::atomic<std::uint32_t> node_count{1};
+    alignas(64) std::atomic<int> depth{0};
 };
 
 // Bounds of refs[begin, end) and of their doubled centres.

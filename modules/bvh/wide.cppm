@@ -19,6 +19,7 @@ export module canopy.bvh:wide;
 import canopy.geometry;
 import :storage;
 import :parallel;
+import :build_buffer;
 
 // The builder's own steps: nothing here is exported.
 namespace canopy {
@@ -126,11 +127,14 @@ void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector
             }
         }
     });
-    // A leaf's first position → its first block.
-    auto const block_of = [&](std::uint32_t start) {
-        auto const k = std::size_t(std::lower_bound(leaf_starts.begin(), leaf_starts.end(), start) - leaf_starts.begin());
-        return first_block[k];
-    };
+    // A leaf's first position → its first block, looked up directly: block_at[s] is written for
+    // every leaf start s (the other entries are never read, and stay unwritten).
+    detail::build_buffer<std::uint32_t> block_at;
+    block_at.resize(order.size());
+    parallel_for_chunks(leaves, 4096, [&](std::size_t first, std::size_t last) {
+        for (std::size_t k = first; k < last; ++k) block_at[leaf_starts[k]] = first_block[k];
+    });
+    auto const block_of = [&](std::uint32_t start) { return block_at[start]; };
     parallel_for_chunks(b.nodes.size(), 4096, [&](std::size_t first, std::size_t last) {
         for (std::size_t i = first; i < last; ++i)
             if (b.nodes[i].is_leaf()) b.nodes[i].index = block_of(b.nodes[i].index);
