@@ -20,6 +20,7 @@ module;
 #include <bit>
 #include <cmath>
 #include <concepts>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <span>
@@ -1465,6 +1466,72 @@ CANOPY_SIMD_INLINE basic_simd<std::int32_t, N> as_int(basic_simd<float, N> x) {
 template <int N>
 CANOPY_SIMD_INLINE basic_simd<float, N> as_float(basic_simd<std::int32_t, N> x) {
     return basic_simd<float, N>(detail::backend<std::int32_t, N>::as_float(x.native()));
+}
+
+} // namespace canopy::simd
+
+namespace canopy::simd::detail {
+
+#if defined(CANOPY_SIMD_AVX2)
+// The 8 × 8 transposition of simd::transpose with AVX: unpack pairs of rows, shuffle pairs of
+// pairs, swap 128-bit halves. Not a template, so that the intrinsics it names stay reachable
+// from the modules that instantiate transpose.
+CANOPY_SIMD_INLINE void transpose_8x8(std::array<__m256, 8>& r) {
+    __m256 const t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
+    __m256 const t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
+    __m256 const t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
+    __m256 const t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
+    __m256 const s0 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+    __m256 const s1 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+    __m256 const s2 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+    __m256 const s3 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(3, 2, 3, 2));
+    __m256 const s4 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(1, 0, 1, 0));
+    __m256 const s5 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(3, 2, 3, 2));
+    __m256 const s6 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(1, 0, 1, 0));
+    __m256 const s7 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(3, 2, 3, 2));
+    r[0] = _mm256_permute2f128_ps(s0, s4, 0x20);
+    r[1] = _mm256_permute2f128_ps(s1, s5, 0x20);
+    r[2] = _mm256_permute2f128_ps(s2, s6, 0x20);
+    r[3] = _mm256_permute2f128_ps(s3, s7, 0x20);
+    r[4] = _mm256_permute2f128_ps(s0, s4, 0x31);
+    r[5] = _mm256_permute2f128_ps(s1, s5, 0x31);
+    r[6] = _mm256_permute2f128_ps(s2, s6, 0x31);
+    r[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
+}
+#endif
+
+} // namespace canopy::simd::detail
+
+export namespace canopy::simd {
+
+// Bit i = the sign bit of lane i (set for -0 and negative NaNs too, as std::signbit).
+template <int N>
+CANOPY_SIMD_INLINE std::uint32_t sign_bits(basic_simd<float, N> x) {
+    return movemask(as_int(x) < basic_simd<std::int32_t, N>(0));
+}
+
+// An N × N block of floats transposed in registers: lane c of rows[r] goes to lane r of rows[c]
+// (an array of N structures of N floats, loaded one structure per vector, becomes one vector
+// per member). AVX2: unpack, shuffle and lane-swap steps; other widths and backends go through
+// memory.
+template <int N>
+CANOPY_SIMD_INLINE void transpose(std::array<basic_simd<float, N>, std::size_t(N)>& rows) {
+#if defined(CANOPY_SIMD_AVX2)
+    if constexpr (N == 8) {
+        std::array<__m256, 8> r;
+        for (std::size_t i = 0; i < 8; ++i) r[i] = rows[i].native();
+        detail::transpose_8x8(r);
+        for (std::size_t i = 0; i < 8; ++i) rows[i] = basic_simd<float, N>(r[i]);
+        return;
+    }
+#endif
+    std::array<float, std::size_t(N) * std::size_t(N)> m;
+    for (std::size_t i = 0; i < std::size_t(N); ++i) rows[i].store(m.data() + i * std::size_t(N));
+    for (std::size_t c = 0; c < std::size_t(N); ++c) {
+        std::array<float, std::size_t(N)> column;
+        for (std::size_t i = 0; i < std::size_t(N); ++i) column[i] = m[i * std::size_t(N) + c];
+        rows[c] = basic_simd<float, N>::load(column.data());
+    }
 }
 
 } // namespace canopy::simd

@@ -5,6 +5,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cfloat>
 #include <cmath>
@@ -796,6 +797,47 @@ TEMPLATE_TEST_CASE("as_int and as_float reinterpret the bits unchanged", "[simd]
                     [](std::int32_t a) { return std::bit_cast<float>(a); }, int_ops.a);
   check_lanewise<n>([](F a) { return simd::as_int(a); },
                     [](float a) { return std::bit_cast<std::int32_t>(a); }, float_ops.a);
+}
+
+TEMPLATE_TEST_CASE("sign_bits gives each lane's sign bit, -0 and negative NaN included", "[simd]", float4,
+                   float8, float16) {
+  using V = TestType;
+  constexpr int n = V::width;
+  float const specials[] = {0.0f, -0.0f, 1.0f, -1.0f, infinity, -infinity, quiet_nan, -quiet_nan,
+                            FLT_MIN, -FLT_MIN, FLT_TRUE_MIN, -FLT_TRUE_MIN};
+  std::mt19937 rng(31);
+  for (int round = 0; round < 64; ++round) {
+    alignas(64) float lanes[n];
+    std::uint32_t expected = 0;
+    for (int i = 0; i < n; ++i) {
+      lanes[i] = round < 32 ? specials[std::size_t(rng() % std::size(specials))] : random_value<float>(rng);
+      if (std::signbit(lanes[i])) expected |= 1u << i;
+    }
+    CHECK(simd::sign_bits(V::load(lanes)) == expected);
+  }
+}
+
+TEMPLATE_TEST_CASE("transpose moves lane c of row r to lane r of row c", "[simd]", float4, float8, float16) {
+  using V = TestType;
+  constexpr int n = V::width;
+  std::mt19937 rng(32);
+  for (int round = 0; round < 16; ++round) {
+    float m[n][n];
+    std::array<V, std::size_t(n)> rows;
+    for (int r = 0; r < n; ++r) {
+      for (int c = 0; c < n; ++c) m[r][c] = round == 0 ? float(r * n + c) : random_value<float>(rng);
+      rows[std::size_t(r)] = V::load(m[r]);
+    }
+    simd::transpose(rows);
+    for (int c = 0; c < n; ++c) {
+      alignas(64) float out[n];
+      rows[std::size_t(c)].store(out);
+      for (int r = 0; r < n; ++r) {
+        INFO("round " << round << ", row " << r << ", lane " << c);
+        CHECK(std::bit_cast<std::uint32_t>(out[r]) == std::bit_cast<std::uint32_t>(m[r][c]));
+      }
+    }
+  }
 }
 
 TEST_CASE("scalar overloads follow the same rules as the lanes", "[simd]") {

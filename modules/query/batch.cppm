@@ -15,7 +15,8 @@
 // - their origins lie within a box whose sides are at most batch_origin_spread (1/64) of the
 //   largest side of the bounds of [first, last) (camera rays: one origin; shadow rays from
 //   neighbouring pixels: close origins).
-// The test reads the 8 rays once: it costs far less than tracing them.
+// The test runs on the group packed as a packet (one load per ray and one 8 × 8 transposition),
+// in a few dozen vector instructions: far less than tracing the rays.
 //
 // Whether packets pay is then measured, not guessed (batch_packing::adaptive, the default). On
 // large meshes seen from afar the lanes of a packet part early, and a packet costs more than its
@@ -66,8 +67,10 @@ module;
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <cstdint>
 #include <span>
 #include <stdexcept>
@@ -185,40 +188,41 @@ float batch_spread_limit(It first, It last) {
     return std::isfinite(side) && side > 0.0f ? side * batch_origin_spread : 0.0f;
 }
 
-// The coherence test of one group of 8 rays (see the top of this file).
-inline bool coherent_group(std::span<ray const> group, float spread_limit) {
-    int active = 0;
-    unsigned signs = 0;
-    vec3<float> lo, hi;
-    for (auto const& r : group) {
-        if (!active_lanes(r)) continue;
-        unsigned const s = unsigned(std::signbit(r.direction.x)) | unsigned(std::signbit(r.direction.y)) << 1 |
-                           unsigned(std::signbit(r.direction.z)) << 2;
-        if (active == 0) {
-            signs = s;
-            lo = hi = r.origin;
-        } else {
-            if (s != signs) return false;
-            lo = min(lo, r.origin);
-            hi = max(hi, r.origin);
-        }
-        ++active;
-    }
-    if (active < 2) return false;
-    auto const spread = hi - lo;
-    return spread.x <= spread_limit && spread.y <= spread_limit && spread.z <= spread_limit;
+// The 8 rays of a group as one packet: each ray is 8 floats (origin, tmin, direction, tmax), loaded
+// as one vector; the 8 × 8 block transposed gives one vector per member.
+inline batch_packet pack_group(std::span<ray const> group) {
+    static_assert(sizeof(ray) == batch_width * sizeof(float) && offsetof(ray, origin) == 0 &&
+                      offsetof(ray, tmin) == 3 * sizeof(float) && offsetof(ray, direction) == 4 * sizeof(float) &&
+                      offsetof(ray, tmax) == 7 * sizeof(float),
+                  "pack_group reads a ray as 8 consecutive floats");
+    std::array<simd::float8, batch_width> rows;
+    for (std::size_t k = 0; k < batch_width; ++k)
+        rows[k] = simd::float8::load(reinterpret_cast<float const*>(&group[k]));
+    simd::transpose(rows);
+    batch_packet p;
+    p.origin = {rows[0], rows[1], rows[2]};
+    p.tmin = rows[3];
+    p.direction = {rows[4], rows[5], rows[6]};
+    p.tmax = rows[7];
+    return p;
 }
 
-inline batch_packet pack_group(std::span<ray const> group) {
-    batch_packet p;
-    for (int k = 0; k < int(batch_width); ++k) {
-        auto const& r = group[std::size_t(k)];
-        set_lane(p.origin, k, r.origin);
-        set_lane(p.direction, k, r.direction);
-        p.tmin.set(k, r.tmin);
-        p.tmax.set(k, r.tmax);
+// The coherence test of one group of 8 rays, packed (see the top of this file), over the lanes
+// that take part: at least two, one octant (sign bits: -0 counts as negative), origins within
+// spread_limit on each axis.
+inline bool coherent_group(batch_packet const& p, float spread_limit) {
+    std::uint32_t const active = simd::movemask(active_lanes(p));
+    if (std::popcount(active) < 2) return false;
+    auto const taking_part = simd::mask_type_t<simd::float8>::from_bits(active);
+    simd::float8 const inf(std::numeric_limits<float>::infinity());
+    for (int a = 0; a < 3; ++a) {
+        std::uint32_t const negative = simd::sign_bits(p.direction[a]) & active;
+        if (negative != 0 && negative != active) return false;
+        float const lo = simd::reduce_min(simd::select(taking_part, p.origin[a], inf));
+        float const hi = simd::reduce_max(simd::select(taking_part, p.origin[a], -inf));
+        if (!(hi - lo <= spread_limit)) return false;
     }
-    return p;
+    return true;
 }
 
 inline void check_batch_sizes(std::size_t rays, std::size_t results) {
@@ -243,10 +247,10 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
             float const limit = batch_spread_limit(first, last);
             packing_policy policy(packing);
             for (; i + batch_width <= rays.size(); i += batch_width) {
-                auto const group = rays.subspan(i, batch_width);
-                bool const coherent = coherent_group(group, limit);
+                auto const p = pack_group(rays.subspan(i, batch_width));
+                bool const coherent = coherent_group(p, limit);
                 if (coherent && policy.packs_next()) {
-                    packet(i, pack_group(group));
+                    packet(i, p);
                     ++stats.packets;
                     policy.packet_traced();
                 } else {
