@@ -328,6 +328,7 @@ struct node_tester<T, S, I, true> {
                                                                         std::uint32_t lanes) const {
         constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
         T const missed(std::numeric_limits<float>::infinity());
+        auto const reached = simd::mask_type_t<T>::from_bits(lanes); // once per node, not per child
         child_hits<float, std::uint32_t> h;
         std::array<T, bvh_width> entry; // per child: tnear in the lanes that hit it, +inf elsewhere
         for (int i = 0; i < bvh_width; ++i) {
@@ -340,10 +341,11 @@ struct node_tester<T, S, I, true> {
                 tfar = a == 0 ? far : simd::min(far, tfar);
             }
             tfar = simd::min(tfar * T(far_scale), box_tmax_lanes);
-            std::uint32_t const hit_lanes = simd::movemask(tnear <= tfar) & lanes;
+            auto const hit = (tnear <= tfar) & reached;
+            std::uint32_t const hit_lanes = simd::movemask(hit);
             h.mask |= std::uint32_t(hit_lanes != 0) << i;
             h.lanes[c] = hit_lanes;
-            entry[c] = simd::select(simd::mask_type_t<T>::from_bits(hit_lanes), tnear, missed);
+            entry[c] = simd::select(hit, tnear, missed);
         }
         for (std::uint32_t m = h.mask; m != 0; m &= m - 1) {
             auto const c = std::size_t(std::countr_zero(m));
