@@ -9,9 +9,10 @@
 // where the two sides of the best object split overlap by more than split_overlap of the root's
 // surface area and more than split_node_overlap of the node's (Embree's second test), and add at
 // most split_budget × n references in all: each node's share of the budget goes to its children
-// in proportion to their references, so the tree does not depend on how threads are scheduled. The references live in one array with room for each subtree's budget
-// (Embree's extended ranges, spatial_context); a subtree whose budget is spent is built by
-// canopy.bvh:object's build_node in place. Nodes of 4 × parallel_threshold references and more
+// in proportion to their references, so the tree does not depend on how threads are scheduled.
+// The references live in one array with room for each subtree's budget (Embree's extended ranges,
+// spatial_context); a subtree whose budget is spent is built by canopy.bvh:object's build_node in
+// place. Nodes of 4 × parallel_threshold references and more
 // bin their spatial splits in parallel (find_spatial_split), with the same bins.
 //
 // Guarantees:

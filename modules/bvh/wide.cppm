@@ -127,23 +127,22 @@ void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector
             }
         }
     });
-    // A leaf's first position → its first block, looked up directly: block_at[s] is written for
-    // every leaf start s (the other entries are never read, and stay unwritten).
+    // A leaf's first position s → its first block, block_at[s]: written for every leaf start (the
+    // other entries are never read, and stay unwritten).
     detail::build_buffer<std::uint32_t> block_at;
     block_at.resize(order.size());
     parallel_for_chunks(leaves, 4096, [&](std::size_t first, std::size_t last) {
         for (std::size_t k = first; k < last; ++k) block_at[leaf_starts[k]] = first_block[k];
     });
-    auto const block_of = [&](std::uint32_t start) { return block_at[start]; };
     parallel_for_chunks(b.nodes.size(), 4096, [&](std::size_t first, std::size_t last) {
         for (std::size_t i = first; i < last; ++i)
-            if (b.nodes[i].is_leaf()) b.nodes[i].index = block_of(b.nodes[i].index);
+            if (b.nodes[i].is_leaf()) b.nodes[i].index = block_at[b.nodes[i].index];
     });
     parallel_for_chunks(b.wide_nodes.size(), 1024, [&](std::size_t first, std::size_t last) {
         for (std::size_t i = first; i < last; ++i) {
             auto& node = b.wide_nodes[i];
             for (std::size_t k = 0; k < std::size_t(bvh_width); ++k)
-                if (node.count[k] != 0) node.child[k] = block_of(node.child[k]);
+                if (node.count[k] != 0) node.child[k] = block_at[node.child[k]];
         }
     });
     b.primitives = {};
