@@ -314,16 +314,46 @@ struct node_tester<T, S, I, true> {
             far_row[k] = far_plane_row(k, negative);
             near_term[k] = -r.slabs.near_offset[a];
             far_term[k] = -r.slabs.far_offset[a];
+            // The packet's bounds for the frustum test (all lanes: every one is finite here).
+            inv_dir_lo[k] = simd::float8(simd::reduce_min(r.inv_dir[a]));
+            inv_dir_hi[k] = simd::float8(simd::reduce_max(r.inv_dir[a]));
+            near_term_lo[k] = simd::float8(simd::reduce_min(near_term[k]));
+            far_term_hi[k] = simd::float8(simd::reduce_max(far_term[k]));
         }
         tmax_changed();
     }
 
-    // Every slot is tested, with no branch on whether it is used or hit: the branches of a loop
-    // that stopped at the first unused slot and skipped missed children were mispredicted about
-    // twice per node (callgrind's branch simulation). Unused slots hold empty boxes, which the
-    // fused form misses by construction (every lane's inverse direction is finite and non-zero
-    // here: canopy.geometry:box, slab_offsets). A hit child's entry distance, the smallest over
-    // the lanes that hit it, is reduced only for the children hit.
+    // The children that some lane of the packet may hit, all eight at once: a superset of those
+    // the lanes hit (Reshetov et al. 2005's frustum, in interval form). Per axis, for every lane
+    // i, p·r_i lies between p·r_lo and p·r_hi (all lanes share the sign of r), and the lane's
+    // term between the packet's extremes; rounding is monotonic, so the smaller of the two fused
+    // products bounds every lane's near distance from below and the larger every far distance from
+    // above, bit for bit as the lanes compute them. The far bound scaled and clipped by the widest
+    // box tmax bounds each lane's tfar from above (box_test_tmax is monotonic): a child whose
+    // lower bound exceeds it is missed by every lane. Empty slots give +inf against -inf.
+    [[gnu::always_inline]] inline std::uint32_t frustum_candidates(wide_bvh_node<float> const& node) const {
+        using simd::float8;
+        constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
+        float8 lo, hi;
+        for (std::size_t a = 0; a < 3; ++a) {
+            auto const pn = float8::load(node.planes[near_row[a]].data());
+            auto const pf = float8::load(node.planes[far_row[a]].data());
+            float8 const n = simd::min(simd::fma(pn, inv_dir_lo[a], near_term_lo[a]), simd::fma(pn, inv_dir_hi[a], near_term_lo[a]));
+            float8 const f = simd::max(simd::fma(pf, inv_dir_lo[a], far_term_hi[a]), simd::fma(pf, inv_dir_hi[a], far_term_hi[a]));
+            lo = a == 0 ? n : simd::max(n, lo);
+            hi = a == 0 ? f : simd::min(f, hi);
+        }
+        hi = simd::min(hi * float8(far_scale), box_tmax_widest);
+        return simd::movemask(lo <= hi);
+    }
+
+    // The frustum test first picks, all eight slots at once, the children that some lane may hit
+    // (frustum_candidates, a superset of the children hit); each of those is then tested against
+    // every lane. Slots the frustum drops, unused ones included (empty boxes, which the fused form
+    // misses by construction: every lane's inverse direction is finite and non-zero here,
+    // canopy.geometry:box, slab_offsets), are missed by every lane, so the hits are those of
+    // testing every slot. A hit child's entry distance, the smallest over the lanes that hit it,
+    // is reduced only for the children hit.
     [[gnu::always_inline]] inline child_hits<float, std::uint32_t> test(wide_bvh_node<float> const& node,
                                                                         std::uint32_t lanes) const {
         constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
@@ -331,7 +361,8 @@ struct node_tester<T, S, I, true> {
         auto const reached = simd::mask_type_t<T>::from_bits(lanes); // once per node, not per child
         child_hits<float, std::uint32_t> h;
         std::array<T, bvh_width> entry; // per child: tnear in the lanes that hit it, +inf elsewhere
-        for (int i = 0; i < bvh_width; ++i) {
+        for (std::uint32_t candidates = frustum_candidates(node); candidates != 0; candidates &= candidates - 1) {
+            int const i = std::countr_zero(candidates);
             auto const c = std::size_t(i);
             T tnear = ray.tmin;
             T tfar;
@@ -354,12 +385,19 @@ struct node_tester<T, S, I, true> {
         return h;
     }
     float box_tmax() const { return box_test_tmax(widest_tmax(ray.tmax)); }
-    [[gnu::always_inline]] inline void tmax_changed() { box_tmax_lanes = box_test_tmax(ray.tmax); }
+    [[gnu::always_inline]] inline void tmax_changed() {
+        box_tmax_lanes = box_test_tmax(ray.tmax);
+        box_tmax_widest = simd::float8(box_tmax());
+    }
 
     prepared_ray<T> const& ray;
     std::array<T, 3> near_term, far_term; // minus the fused offsets
     std::array<std::size_t, 3> near_row, far_row;
     T box_tmax_lanes;
+    // The frustum (frustum_candidates): per axis the extremes of the lanes' inverse directions,
+    // the smallest near term and the largest far term; the widest box tmax.
+    std::array<simd::float8, 3> inv_dir_lo, inv_dir_hi, near_term_lo, far_term_hi;
+    simd::float8 box_tmax_widest;
 };
 
 // Starts loading the memory of one pending child (a wide node, or a leaf's primitives) into the
