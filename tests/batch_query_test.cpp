@@ -360,10 +360,11 @@ TEST_CASE("with spatial splits, batch queries are bit-identical too, any hit inc
 }
 
 TEST_CASE("packets down to one or two lanes continue as single rays with the single rays' results") {
-    // Below packet_lanes_alone_below lanes at a node, a packet with no intersector traces each lane
-    // from there alone. Packets whose lanes spread over the scene split early, at every level of
-    // instancing; packets with one or two rays taking part do so below the root.
-    static_assert(canopy::packet_lanes_alone_below >= 3, "the cases below would not reach lanes traced alone");
+    // Below packet_lanes_alone_below lanes at a node (or a leaf of instances), a packet with no
+    // intersector traces each lane from there alone. Packets whose lanes spread over the scene
+    // split early, at every level of instancing; packets with two rays taking part do so where
+    // the two part.
+    static_assert(canopy::packet_lanes_alone_below >= 2, "the cases below would not reach lanes traced alone");
     random_source rng(1407);
     scenes const s(rng);
     auto check = [&](canopy::aabb const& box, auto first, auto last) {
@@ -384,7 +385,9 @@ TEST_CASE("packets down to one or two lanes continue as single rays with the sin
             if (g % 3 == 2)
                 for (std::size_t k = 2; k < 8; ++k) rays[rays.size() - 8 + k].tmax = -1.0f;
         }
+        canopy::detail::packet_occupancy_tally = {};
         compare(rays, first, last, canopy::default_intersector{}, t);
+        CHECK(canopy::detail::packet_occupancy_tally.lanes_alone > 0); // the case under test happened
         CHECK(t.mismatches == 0);
         CHECK(t.packets == 2 * 80); // closest and any: the groups of 2 and of 8 rays taking part
         CHECK(t.hits > 80);
@@ -397,8 +400,9 @@ TEST_CASE("packets down to one or two lanes continue as single rays with the sin
 TEST_CASE("adaptive packing keeps packets where their lanes stay together and traces single rays where they part") {
     // The same camera over a few large triangles (a packet's lanes reach the same nodes) and over
     // 60,000 small ones (8 neighbouring rays part near the root). The adaptive policy measures the
-    // packets' lanes per node visit (canopy.bvh:traverse, packet_occupancy) and unpacks only the
-    // second; the results are the single rays' either way, and the choices the same on every run.
+    // packets' lanes per node visit and lanes gone on alone (canopy.bvh:traverse,
+    // packet_occupancy) and unpacks only the second; the results are the single rays' either way,
+    // and the choices the same on every run.
     using canopy::batch_packing;
     random_source rng(1408);
     auto const coarse_soup = triangle_soup(rng, 200, 8.0f, 4.0f);
@@ -407,17 +411,28 @@ TEST_CASE("adaptive packing keeps packets where their lanes stay together and tr
     mesh_bvh const fine = canopy::build_binned_sah(fine_soup);
     auto const rays = camera_rays(coarse.bounds(), 64, 48);
 
-    // The lanes per node visit of every coherent group traced as a packet, in quarters of a lane.
-    auto occupancy_quarters = [&](mesh_bvh const& b) {
+    // Over every coherent group traced as a packet: the lanes per node visit, in eighths of a
+    // lane, and the lanes gone on alone per packet, in halves.
+    struct measure {
+        double occupancy_eighths, alone_halves;
+    };
+    auto measure_packets = [&](mesh_bvh const& b) {
         std::vector<record> out(rays.size());
         canopy::detail::packet_occupancy_tally = {};
-        canopy::closest_hit(rays, &b, &b + 1, out, canopy::default_intersector{}, batch_packing::always);
+        auto const stats =
+            canopy::closest_hit(rays, &b, &b + 1, out, canopy::default_intersector{}, batch_packing::always);
         auto const o = canopy::detail::packet_occupancy_tally;
         REQUIRE(o.node_visits > 0);
-        return double(4 * o.node_lanes) / double(o.node_visits);
+        REQUIRE(stats.packets > 0);
+        return measure{double(8 * o.node_lanes) / double(o.node_visits), double(2 * o.lanes_alone) / double(stats.packets)};
     };
-    CHECK(occupancy_quarters(coarse) >= double(canopy::batch_paying_occupancy_quarters));
-    CHECK(occupancy_quarters(fine) < double(canopy::batch_paying_occupancy_quarters));
+    auto const paying = double(canopy::batch_paying_occupancy_eighths);
+    auto const alone_limit = double(canopy::batch_lanes_alone_halves);
+    auto const c = measure_packets(coarse);
+    CHECK(c.occupancy_eighths >= paying);
+    CHECK(c.alone_halves <= alone_limit);
+    auto const f = measure_packets(fine);
+    CHECK((f.occupancy_eighths < paying || f.alone_halves > alone_limit));
 
     auto check = [&](mesh_bvh const& b, auto const& isect, bool expect_unpacked) {
         std::vector<record> single(rays.size());

@@ -43,11 +43,15 @@ import :protocol;
 
 export namespace canopy {
 
-// Packets whose lanes reaching a node or leaf are fewer than this trace it one lane at a time, as
-// scalar rays (Embree's hybrid traversal): a packet pays a whole packet's work per box and
-// triangle for the few lanes it carries, where a scalar ray tests 8 boxes or 8 triangles at once.
-// Only for intersectors that intercept nothing (see may_trace_lanes_alone); results are the same.
-inline constexpr int packet_lanes_alone_below = 3;
+// Packets whose lanes reaching a node, or a leaf of instances or nested BVHs, are fewer than this
+// trace it one lane at a time, as scalar rays (Embree's hybrid traversal): a packet pays a whole
+// packet's work per box for the few lanes it carries, where a scalar ray tests 8 boxes at once.
+// Leaves of triangle blocks are always tested as a packet, whatever its lanes: a lane going on
+// alone pays its own set-up (its scalar ray, its shear, its query) before its one block test,
+// which costs more than the packet's test of the block's triangles (measured: docs/performance.md,
+// Run 13). Only for intersectors that intercept nothing (see may_trace_lanes_alone); results are
+// the same.
+inline constexpr int packet_lanes_alone_below = 2;
 
 // The arrays that traversal of a BVH reads: heap buffers, which stay where they are when the bvh
 // object moves (std::vector's move constructor keeps its buffer). Instances hold this instead of
@@ -598,7 +602,8 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
     [[maybe_unused]] std::conditional_t<tally, occupancy, no_lanes> counts;
     for (;;) {
         if constexpr (may_trace_lanes_alone<T, I, Prim, Query>) {
-            if (std::popcount(current.lanes) < packet_lanes_alone_below) {
+            if ((current.count == 0 || !stores_triangle_blocks_v<Prim>) &&
+                std::popcount(current.lanes) < packet_lanes_alone_below) {
                 counts.lanes_alone += std::uint32_t(std::popcount(current.lanes));
                 if (traverse_lanes_alone(ray, b, isect, query, current)) return true;
                 nodes.tmax_changed();

@@ -23,22 +23,25 @@
 // rays traced one by one (a packet tests one child box or one triangle at a time against its
 // lanes, a single ray eight boxes or eight triangles at once). Packets of an intersector that
 // intercepts nothing count, as they go, the lanes that reach each wide node they visit
-// (canopy.bvh:traverse, packet_occupancy). After every batch_probe_packets packets the batch
-// looks at the window's mean: below batch_paying_occupancy lanes per node visit, the next
-// batch_skip_groups coherent groups are traced one ray at a time, then packets are probed again.
-// The counts depend only on the rays and the scene, never on timing: a batch makes the same
-// choices on every run. Measured (canopy_bench_profile --batch, docs/performance.md): packets
-// that pay average 7.1–7.3 lanes per node visit (CAD model, bunny), packets that lose 5.8–6.5
-// (1M-triangle sphere, 2M terrain, soup); windows vary around those means, and a threshold of 6.5
-// already unpacked windows where packets pay, hence 6. The signal is coarse: the forest's packets
-// lose on primary closest hits at 7.25 lanes per visit. batch_packing::always keeps every
-// coherent group a packet.
+// (canopy.bvh:traverse, packet_occupancy), and the lanes that went on alone. After every
+// batch_probe_packets packets the batch looks at the window's means: fewer than
+// batch_paying_occupancy_eighths / 8 lanes per node visit, or more than
+// batch_lanes_alone_halves / 2 lanes gone on alone per packet, and the next batch_skip_groups
+// coherent groups are traced one ray at a time, then packets are probed again. The counts depend
+// only on the rays and the scene, never on timing: a batch makes the same choices on every run.
+// Measured on primary rays (canopy_bench_profile --batch --packets-always, docs/performance.md,
+// Run 13), packets that pay: CAD model and bunny 6.8–7.0 lanes per node visit and 0.1–0.2 lanes
+// alone per packet, slivers 5.9–7.0 and 0.3–0.5, 1.3M-triangle sphere 5.5–5.9 and 0.8–1.1, soup
+// 5.25–5.45 and 3.1–3.5; packets that lose: 2M terrain 5.0 and 2.1, the forest's instances
+// 6.2–6.3 and 5.9–6.1. Hence 41/8 (5.125) and 9/2 (4.5), between the two sides; the signal is
+// coarse, and batch_packing::always keeps every coherent group a packet.
 //
 // How a packet is traced (canopy.bvh:traverse): its node test takes one child box at a time
 // against all lanes; its leaf test one triangle at a time, read straight from the leaf's block,
 // with the vertex components picked once for all lanes when they share one shear permutation
 // (canopy.geometry:triangle_block, intersect_lane); and with no hook or filter, lanes that reach
-// a node or leaf fewer than packet_lanes_alone_below at a time go on from there as scalar rays.
+// a node (or a leaf of instances) fewer than packet_lanes_alone_below at a time go on from there
+// as scalar rays.
 //
 // Guarantees:
 // - Results are bit-identical to the single-ray queries (hit, t, u, v, prim_id, geom_id, inst_id,
@@ -95,10 +98,12 @@ struct batch_stats {
 enum class batch_packing { adaptive, always };
 
 // The adaptive policy (see the top of this file): packets per measured window; the lanes per node
-// visit, in quarters, from which packets pay (24/4 = 6 of 8); the coherent groups traced one
-// ray at a time after a window that did not pay (then one window in 16 probes packets again).
+// visit, in eighths, from which packets pay (41/8 = 5.125 of 8); the lanes gone on alone per
+// packet, in halves, beyond which they do not (9/2 = 4.5); the coherent groups traced one ray at
+// a time after a window that did not pay (then one window in 16 probes packets again).
 inline constexpr std::size_t batch_probe_packets = 16;
-inline constexpr std::uint64_t batch_paying_occupancy_quarters = 24;
+inline constexpr std::uint64_t batch_paying_occupancy_eighths = 41;
+inline constexpr std::uint64_t batch_lanes_alone_halves = 9;
 inline constexpr std::size_t batch_skip_groups = 15 * batch_probe_packets;
 
 // The largest origin spread of a packet, as a fraction of the largest side of the scene's bounds.
@@ -111,13 +116,14 @@ namespace canopy::detail {
 inline constexpr std::size_t batch_width = 8;
 using batch_packet = basic_ray<simd::float8>;
 
-// Whether the packets traced between two readings of packet_occupancy_tally paid: true when they
-// counted no node visit (a structure without wide nodes, or an intersector whose packets do not
-// count: they stay packets).
-inline bool packets_paid(packet_occupancy const& before, packet_occupancy const& after) {
+// Whether the `packets` packets traced between two readings of packet_occupancy_tally paid: true
+// when they counted no node visit and no lane alone (a structure without wide nodes, or an
+// intersector whose packets do not count: they stay packets).
+inline bool packets_paid(packet_occupancy const& before, packet_occupancy const& after, std::uint64_t packets) {
     std::uint64_t const visits = after.node_visits - before.node_visits;
     std::uint64_t const lanes = after.node_lanes - before.node_lanes;
-    return 4 * lanes >= batch_paying_occupancy_quarters * visits;
+    std::uint64_t const alone = after.lanes_alone - before.lanes_alone;
+    return 8 * lanes >= batch_paying_occupancy_eighths * visits && 2 * alone <= batch_lanes_alone_halves * packets;
 }
 
 // The adaptive policy's state over one batch (see the top of this file): a window of
@@ -138,7 +144,7 @@ public:
     // Called after each packet: a full window either opens the next or starts the skip.
     void packet_traced() {
         if (!adaptive_ || --probe_left_ != 0) return;
-        if (packets_paid(window_start_, packet_occupancy_tally))
+        if (packets_paid(window_start_, packet_occupancy_tally, batch_probe_packets))
             open_window();
         else
             skip_left_ = batch_skip_groups;
