@@ -117,6 +117,10 @@ struct child_hits {
     [[no_unique_address]] std::conditional_t<std::is_same_v<L, no_lanes>, no_lanes, std::array<L, bvh_width>> lanes;
 };
 
+// The widening of a box's far distances, as in canopy.geometry:box (intersect_slabs_fused): every
+// 8-wide and packet box test of this file scales by it.
+inline constexpr float box_far_scale = 1.0f + 2.0f * gamma<float>(3);
+
 // The rows of wide_bvh_node::planes that hold axis a's near and far planes for a ray that runs
 // towards negative a (an inverse direction below 0; 1/-0 = -inf counts as negative, as in
 // canopy.geometry:box): rows a (minima) and 3 + a (maxima), swapped for such rays.
@@ -182,7 +186,6 @@ template <bool Fused>
 [[gnu::always_inline]] inline child_hits<float> test_children_wide(wide_box_ray<Fused> const& ray,
                                                                    wide_bvh_node<float> const& node) {
     using simd::float8;
-    constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
     float8 tnear = ray.tmin;
     float8 tfar;
     if constexpr (Fused) {
@@ -196,7 +199,7 @@ template <bool Fused>
         tnear = simd::max(ray.distance(node, ray.near_row[a], ray.near_term, a), tnear);
         if (!Fused || a > 0) tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, a), tfar);
     }
-    tfar = simd::min(tfar * float8(far_scale), ray.box_tmax8);
+    tfar = simd::min(tfar * float8(box_far_scale), ray.box_tmax8);
     child_hits<float> h;
     if constexpr (Fused) {
         // Unused slots hold empty boxes, which the fused form misses by construction (finite,
@@ -337,7 +340,6 @@ struct node_tester<T, S, I, true> {
     // lower bound exceeds it is missed by every lane. Empty slots give +inf against -inf.
     [[gnu::always_inline]] inline std::uint32_t frustum_candidates(wide_bvh_node<float> const& node) const {
         using simd::float8;
-        constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
         float8 lo, hi;
         for (std::size_t a = 0; a < 3; ++a) {
             auto const pn = float8::load(node.planes[near_row[a]].data());
@@ -347,7 +349,7 @@ struct node_tester<T, S, I, true> {
             lo = a == 0 ? n : simd::max(n, lo);
             hi = a == 0 ? f : simd::min(f, hi);
         }
-        hi = simd::min(hi * float8(far_scale), box_tmax_widest);
+        hi = simd::min(hi * float8(box_far_scale), box_tmax_widest);
         return simd::movemask(lo <= hi);
     }
 
@@ -360,7 +362,6 @@ struct node_tester<T, S, I, true> {
     // is reduced only for the children hit.
     [[gnu::always_inline]] inline child_hits<float, std::uint32_t> test(wide_bvh_node<float> const& node,
                                                                         std::uint32_t lanes) const {
-        constexpr float far_scale = 1.0f + 2.0f * gamma<float>(3);
         T const missed(std::numeric_limits<float>::infinity());
         auto const reached = simd::mask_type_t<T>::from_bits(lanes); // once per node, not per child
         child_hits<float, std::uint32_t> h;
@@ -375,7 +376,7 @@ struct node_tester<T, S, I, true> {
                 T const far = simd::fma(T(node.planes[far_row[a]][c]), ray.inv_dir[int(a)], far_term[a]);
                 tfar = a == 0 ? far : simd::min(far, tfar);
             }
-            tfar = simd::min(tfar * T(far_scale), box_tmax_lanes);
+            tfar = simd::min(tfar * T(box_far_scale), box_tmax_lanes);
             auto const hit = (tnear <= tfar) & reached;
             std::uint32_t const hit_lanes = simd::movemask(hit);
             h.mask |= std::uint32_t(hit_lanes != 0) << i;
@@ -388,10 +389,13 @@ struct node_tester<T, S, I, true> {
         }
         return h;
     }
-    float box_tmax() const { return box_test_tmax(widest_tmax(ray.tmax)); }
+    // The widest box tmax, reduced once per change of the lanes' tmax (for the stack's culling and
+    // the frustum).
+    float box_tmax() const { return box_tmax_scalar; }
     [[gnu::always_inline]] inline void tmax_changed() {
         box_tmax_lanes = box_test_tmax(ray.tmax);
-        box_tmax_widest = simd::float8(box_tmax());
+        box_tmax_scalar = box_test_tmax(widest_tmax(ray.tmax));
+        box_tmax_widest = simd::float8(box_tmax_scalar);
     }
 
     prepared_ray<T> const& ray;
@@ -402,6 +406,7 @@ struct node_tester<T, S, I, true> {
     // the smallest near term and the largest far term; the widest box tmax.
     std::array<simd::float8, 3> inv_dir_lo, inv_dir_hi, near_term_lo, far_term_hi;
     simd::float8 box_tmax_widest;
+    float box_tmax_scalar;
 };
 
 // Starts loading the memory of one pending child (a wide node, or a leaf's primitives) into the
