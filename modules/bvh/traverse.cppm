@@ -117,10 +117,6 @@ struct child_hits {
     [[no_unique_address]] std::conditional_t<std::is_same_v<L, no_lanes>, no_lanes, std::array<L, bvh_width>> lanes;
 };
 
-// The widening of a box's far distances, as in canopy.geometry:box (intersect_slabs_fused): every
-// 8-wide and packet box test of this file scales by it.
-inline constexpr float box_far_scale = 1.0f + 2.0f * gamma<float>(3);
-
 // The rows of wide_bvh_node::planes that hold axis a's near and far planes for a ray that runs
 // towards negative a (an inverse direction below 0; 1/-0 = -inf counts as negative, as in
 // canopy.geometry:box): rows a (minima) and 3 + a (maxima), swapped for such rays.
@@ -199,7 +195,7 @@ template <bool Fused>
         tnear = simd::max(ray.distance(node, ray.near_row[a], ray.near_term, a), tnear);
         if (!Fused || a > 0) tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, a), tfar);
     }
-    tfar = simd::min(tfar * float8(box_far_scale), ray.box_tmax8);
+    tfar = simd::min(tfar * float8(box_far_scale<float>), ray.box_tmax8);
     child_hits<float> h;
     if constexpr (Fused) {
         // Unused slots hold empty boxes, which the fused form misses by construction (finite,
@@ -349,7 +345,7 @@ struct node_tester<T, S, I, true> {
             lo = a == 0 ? n : simd::max(n, lo);
             hi = a == 0 ? f : simd::min(f, hi);
         }
-        hi = simd::min(hi * float8(box_far_scale), box_tmax_widest);
+        hi = simd::min(hi * float8(box_far_scale<float>), box_tmax_widest);
         return simd::movemask(lo <= hi);
     }
 
@@ -376,7 +372,7 @@ struct node_tester<T, S, I, true> {
                 T const far = simd::fma(T(node.planes[far_row[a]][c]), ray.inv_dir[int(a)], far_term[a]);
                 tfar = a == 0 ? far : simd::min(far, tfar);
             }
-            tfar = simd::min(tfar * T(box_far_scale), box_tmax_lanes);
+            tfar = simd::min(tfar * T(box_far_scale<float>), box_tmax_lanes);
             auto const hit = (tnear <= tfar) & reached;
             std::uint32_t const hit_lanes = simd::movemask(hit);
             h.mask |= std::uint32_t(hit_lanes != 0) << i;

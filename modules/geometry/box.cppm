@@ -30,6 +30,11 @@ template <typename T>
     return simd::select(tmax >= T(0), tmax * T(S(1) + widen), tmax * T(S(1) - widen));
 }
 
+// The widening of a box test's far distances (Ize 2013: the three roundings of a slab distance,
+// 1 + 2γ3), shared by every box test, the 8-wide and packet tests of canopy.bvh included.
+template <typename S>
+inline constexpr S box_far_scale = S(1) + S(2) * gamma<S>(3);
+
 template <typename T>
 struct box_hit {
     simd::mask_type_t<T> hit{};
@@ -46,7 +51,6 @@ template <typename T, typename S>
 [[gnu::always_inline]] inline box_hit<T> intersect_slabs(basic_ray<T> const& ray, basic_aabb<S> const& box,
                                                          vec3<T> const& inv_dir, vec3<T> const& near_origin,
                                                          vec3<T> const& far_origin) {
-    constexpr S far_scale = S(1) + S(2) * gamma<S>(3);
     T tnear = ray.tmin;
     T tfar = box_test_tmax(ray.tmax);
     for (int axis = 0; axis < 3; ++axis) {
@@ -57,7 +61,7 @@ template <typename T, typename S>
         T const near_plane = simd::select(negative, T(box.max[axis]), T(box.min[axis]));
         T const far_plane = simd::select(negative, T(box.min[axis]), T(box.max[axis]));
         T const slab_near = (near_plane - near_origin[axis]) * inv_dir[axis];
-        T const slab_far = (far_plane - far_origin[axis]) * inv_dir[axis] * far_scale;
+        T const slab_far = (far_plane - far_origin[axis]) * inv_dir[axis] * box_far_scale<S>;
         tnear = simd::max(slab_near, tnear);
         tfar = simd::min(slab_far, tfar);
     }
@@ -111,7 +115,6 @@ template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 [[gnu::always_inline]] inline box_hit<T> intersect_slabs_fused(basic_ray<T> const& ray, basic_aabb<S> const& box,
                                                                vec3<T> const& inv_dir, slab_offsets<T> const& offsets) {
-    constexpr S far_scale = S(1) + S(2) * gamma<S>(3);
     T tnear = ray.tmin;
     T tfar(std::numeric_limits<S>::infinity());
     for (int axis = 0; axis < 3; ++axis) {
@@ -122,7 +125,7 @@ template <typename T, typename S>
         tfar = simd::min(simd::fma(far_plane, inv_dir[axis], -offsets.far_offset[axis]), tfar);
     }
     // One scaling after the minimum: rounding is monotonic, so this equals scaling each slab.
-    tfar = simd::min(tfar * T(far_scale), box_test_tmax(ray.tmax));
+    tfar = simd::min(tfar * T(box_far_scale<S>), box_test_tmax(ray.tmax));
     return {tnear <= tfar, tnear, tfar};
 }
 

@@ -237,20 +237,18 @@ inline void check_batch_sizes(std::size_t rays, std::size_t results) {
 }
 
 // The batch loop: groups of 8 coherent rays go to packet(index, packet ray) while packets pay
-// (always with batch_packing::always), every other ray to singles(begin, end), one call per run
-// of consecutive rays traced one by one. packet is generic, so that it is only instantiated where
-// packets are traced.
-template <typename I, typename It, typename Packet, typename Singles>
+// (always with batch_packing::always), every other ray to single(index). packet is generic, so
+// that it is only instantiated where packets are traced.
+template <typename I, typename It, typename Packet, typename Single>
 batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packing packing, Packet&& packet,
-                      Singles&& singles) {
+                      Single&& single) {
     using Elem = std::remove_cvref_t<decltype(*first)>;
     batch_stats stats;
-    std::size_t i = 0, run = 0; // rays [run, i) wait to be traced one by one
-    auto const flush = [&] {
-        if (run == i) return;
-        singles(run, i);
-        stats.single_rays += i - run;
+    auto const one = [&](std::size_t k) {
+        single(k);
+        ++stats.single_rays;
     };
+    std::size_t i = 0;
     if constexpr (batch_takes_packets<I, Elem>()) {
         if (rays.size() >= batch_width) {
             float const limit = batch_spread_limit(first, last);
@@ -259,19 +257,17 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
                 auto const p = pack_group(rays.subspan(i, batch_width));
                 bool const coherent = coherent_group(p, limit);
                 if (coherent && policy.packs_next()) {
-                    flush();
                     packet(i, p);
-                    run = i + batch_width;
                     ++stats.packets;
                     policy.packet_traced();
-                } else if (coherent) {
-                    stats.unpacked_rays += batch_width;
+                } else {
+                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
+                    if (coherent) stats.unpacked_rays += batch_width;
                 }
             }
         }
     }
-    i = rays.size();
-    flush();
+    for (; i < rays.size(); ++i) one(i);
     return stats;
 }
 
@@ -279,7 +275,9 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
 // top BVH: the common case) traces it as closest_hit(r, &root, &root + 1): the traversal is then
 // not nested in a loop over roots whose count is only known at run time. Nested in that loop (and
 // inlined into the batch loop), the compiler kept 4 of the node test's 6 fma operands on the stack:
-// random rays made 35 % more loads and ran 3-13 % slower in a batch than one by one. Packets are
+// random rays made 35 % more loads and ran 3-13 % slower in a batch than one by one; so did a loop
+// over the unpacked rays inside one out-of-line call (0.88 of the single-ray loop, against
+// 0.99-1.01 with one call per ray). Packets are
 // the other way round: inlined into the batch loop they take 16-19 % fewer instructions than out
 // of line (callgrind, primary rays of the bunny, the engine and the sphere), so they stay there.
 template <bool Closest, typename Ray, typename It, typename I>
@@ -307,19 +305,6 @@ auto query_one_ray(Ray const& r, It first, It last, I& isect) {
     return query_roots<Closest>(r, first, last, isect);
 }
 
-// rays[k] traced one by one into out[k] (a hit record, or whether the ray hits). One call per ray:
-// the loop over the rays inside the out-of-line function brought the spills back (bunny, random
-// closest: batch 0.88 of the single-ray loop, against 0.99-1.01 this way).
-template <bool Closest, typename It, typename I, typename Out>
-void trace_one_by_one(std::span<ray const> rays, It first, It last, Out* out, I& isect) {
-    for (std::size_t k = 0; k < rays.size(); ++k) {
-        if constexpr (std::is_same_v<Out, bool>)
-            out[k] = query_one_ray<false>(rays[k], first, last, isect).hit;
-        else
-            out[k] = query_one_ray<Closest>(rays[k], first, last, isect);
-    }
-}
-
 } // namespace canopy::detail
 
 export namespace canopy {
@@ -337,9 +322,7 @@ batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<
             auto const hr = closest_hit(p, first, last, isect);
             for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = record_lane(hr, k);
         },
-        [&](std::size_t begin, std::size_t end) {
-            detail::trace_one_by_one<true>(rays.subspan(begin, end - begin), first, last, out.data() + begin, isect);
-        });
+        [&](std::size_t i) { out[i] = detail::query_one_ray<true>(rays[i], first, last, isect); });
 }
 
 // Any hit of every ray: out[i] is what any_hit(rays[i], first, last, isect) returns.
@@ -353,9 +336,7 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basi
             auto const hr = any_hit(p, first, last, isect);
             for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = record_lane(hr, k);
         },
-        [&](std::size_t begin, std::size_t end) {
-            detail::trace_one_by_one<false>(rays.subspan(begin, end - begin), first, last, out.data() + begin, isect);
-        });
+        [&](std::size_t i) { out[i] = detail::query_one_ray<false>(rays[i], first, last, isect); });
 }
 
 // Occlusion of every ray: out[i] is any_hit(rays[i], first, last, isect).hit.
@@ -369,9 +350,7 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<bool
             auto const hr = any_hit(p, first, last, isect);
             for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = hr.hit[k];
         },
-        [&](std::size_t begin, std::size_t end) {
-            detail::trace_one_by_one<false>(rays.subspan(begin, end - begin), first, last, out.data() + begin, isect);
-        });
+        [&](std::size_t i) { out[i] = detail::query_one_ray<false>(rays[i], first, last, isect).hit; });
 }
 
 // Up to N hits of every ray: out[i] is what multi_hit<N>(rays[i], first, last, isect) returns.
