@@ -2,13 +2,13 @@
 // callgrind counts instructions per ray (--toggle-collect on trace_rays, docs/performance.md), perf
 // samples where the time goes.
 //
-//   canopy_bench_profile SCENE RAYS QUERY [--quick] [--count N] [--alpha | --alpha-hook] [--passes P]
+//   canopy_bench_profile SCENE RAYS QUERY [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P]
 //                        [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L]
 //                        [--batch [--packets-always]] [--compare-packing]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow        QUERY  closest | any
 //
-// Traces the first N rays of the set (default: all) P times (default 1) inside trace_rays, the
+// Traces N rays of the set from its I-th (default: all, from the first) P times (default 1) inside trace_rays, the
 // only function a profiler needs to look at, then prints the ray count, hits, nanoseconds per ray
 // (the fastest pass) and, from an untimed pass with a counting intersector, box and triangle
 // tests per ray. The mesh BVH is built at --quality (default fast; high: spatial splits, with
@@ -57,7 +57,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]\n",
                  program);
     return 2;
 }
@@ -132,7 +132,7 @@ int main(int argc, char** argv) {
     if (argc < 4) return usage(argv[0]);
     std::string const scene_name = argv[1], set_name = argv[2], query = argv[3];
     bool quick = false, alpha = false, alpha_hook = false, batch = false, compare_modes = false;
-    std::size_t count = 0;
+    std::size_t count = 0, from = 0;
     int passes = 1;
     canopy::batch_packing packing = canopy::batch_packing::adaptive;
     canopy::bvh_build_options options;
@@ -145,6 +145,7 @@ int main(int argc, char** argv) {
         else if (a == "--packets-always") packing = canopy::batch_packing::always;
         else if (a == "--compare-packing") compare_modes = true;
         else if (a == "--count" && i + 1 < argc) count = std::size_t(std::atoll(argv[++i]));
+        else if (a == "--from" && i + 1 < argc) from = std::size_t(std::atoll(argv[++i]));
         else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
         else if (a == "--quality" && i + 1 < argc) {
             if (!parse_quality(argv[++i], options.quality)) return usage(argv[0]);
@@ -181,6 +182,9 @@ int main(int argc, char** argv) {
     auto sets = make_rays(*s);
     for (auto& set : sets) {
         if (set.name != set_name) continue;
+        // --from I: the set from its I-th ray (e.g. the middle rows of the camera, where primary rays
+        // hit: the first rows often miss the scene), then --count N of them.
+        set.rays.erase(set.rays.begin(), set.rays.begin() + std::ptrdiff_t(std::min(from, set.rays.size())));
         if (count != 0 && count < set.rays.size()) set.rays.resize(count);
         bool const closest = query == "closest";
         if (alpha) return run<canopy::bench_alpha_intersector>(*s, set.rays, closest, passes, batch, packing, compare_modes);
