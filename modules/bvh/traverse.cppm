@@ -120,54 +120,31 @@ struct child_hits {
 // The rows of wide_bvh_node::planes that hold axis a's near and far planes for a ray that runs
 // towards negative a (an inverse direction below 0; 1/-0 = -inf counts as negative, as in
 // canopy.geometry:box): rows a (minima) and 3 + a (maxima), swapped for such rays.
-[[gnu::always_inline]] inline constexpr std::size_t near_plane_row(std::size_t a, bool negative) { return negative ? 3 + a : a; }
-[[gnu::always_inline]] inline constexpr std::size_t far_plane_row(std::size_t a, bool negative) { return negative ? a : 3 + a; }
-
-// The near and far plane rows of each axis for each octant of a ray's direction (bit a set: the
-// inverse direction is below 0 on axis a), so that a ray finds its rows with one lookup.
-struct plane_rows {
-    std::array<std::size_t, 3> near, far;
-};
-inline constexpr std::array<plane_rows, 8> plane_rows_by_octant = [] {
-    std::array<plane_rows, 8> rows{};
-    for (std::uint32_t octant = 0; octant < 8; ++octant)
-        for (std::size_t a = 0; a < 3; ++a) {
-            bool const negative = ((octant >> a) & 1u) != 0;
-            rows[octant].near[a] = near_plane_row(a, negative);
-            rows[octant].far[a] = far_plane_row(a, negative);
-        }
-    return rows;
-}();
-
-// The octant of a scalar ray's inverse direction (see plane_rows_by_octant).
-[[gnu::always_inline]] inline std::uint32_t direction_octant(vec3<float> const& inv_dir) {
-    if constexpr (simd::native_width<4>)
-        return simd::movemask(to_lanes(inv_dir) < simd::float4(0.0f)) & 7u;
-    else
-        return std::uint32_t(inv_dir.x < 0.0f) | std::uint32_t(inv_dir.y < 0.0f) << 1 |
-               std::uint32_t(inv_dir.z < 0.0f) << 2;
-}
+[[gnu::always_inline]] inline std::size_t near_plane_row(std::size_t a, bool negative) { return negative ? 3 + a : a; }
+[[gnu::always_inline]] inline std::size_t far_plane_row(std::size_t a, bool negative) { return negative ? a : 3 + a; }
 
 // The constants of the 8-wide box test for one scalar float ray, computed once per BVH: in every
-// lane the inverse direction and either the fused test's terms (Fused: canopy.geometry:box,
+// lane the inverse direction and either the fused test's offsets (Fused: canopy.geometry:box,
 // slab_offsets) or the near and far origins, and which plane row is near and which far on each
 // axis (by the sign of the inverse direction, Ize 2013's ordered slabs: no select per node).
 template <bool Fused>
 struct wide_box_ray {
     // Member functions of a class in a named module are not implicitly inline: say so, or
     // importers call them instead of inlining them.
-    [[gnu::always_inline]] inline explicit wide_box_ray(prepared_ray<float> const& ray)
-        : rows(plane_rows_by_octant[direction_octant(ray.inv_dir)]) {
+    [[gnu::always_inline]] inline explicit wide_box_ray(prepared_ray<float> const& ray) {
         for (int a = 0; a < 3; ++a) {
             auto const k = std::size_t(a);
             if constexpr (Fused) {
-                near_term[k] = simd::float8(ray.slabs.near_term[a]);
-                far_term[k] = simd::float8(ray.slabs.far_term[a]);
+                near_term[k] = simd::float8(-ray.slabs.near_offset[a]);
+                far_term[k] = simd::float8(-ray.slabs.far_offset[a]);
             } else {
                 near_term[k] = simd::float8(ray.near_origin[a]);
                 far_term[k] = simd::float8(ray.far_origin[a]);
             }
             inv_dir[k] = simd::float8(ray.inv_dir[a]);
+            bool const negative = ray.inv_dir[a] < 0.0f;
+            near_row[k] = near_plane_row(k, negative);
+            far_row[k] = far_plane_row(k, negative);
         }
         tmin = simd::float8(ray.tmin);
         set_tmax(ray.tmax);
@@ -191,7 +168,7 @@ struct wide_box_ray {
 
     // Fused: minus the offsets; else the near and far origins (prepared_ray::widen_box_tests_for).
     std::array<simd::float8, 3> near_term, far_term, inv_dir;
-    plane_rows rows; // this ray's entry of plane_rows_by_octant (a copy: the loop keeps it in registers)
+    std::array<std::size_t, 3> near_row, far_row;
     simd::float8 tmin, box_tmax8;
     float box_tmax = 0.0f;
 };
@@ -210,13 +187,13 @@ template <bool Fused>
     if constexpr (Fused) {
         // No NaN in this form (canopy.geometry:box, slab_offsets): the first far distance is the
         // minimum so far, with no +inf to start from.
-        tfar = ray.distance(node, ray.rows.far[0], ray.far_term, 0);
+        tfar = ray.distance(node, ray.far_row[0], ray.far_term, 0);
     } else {
         tfar = float8(std::numeric_limits<float>::infinity());
     }
     for (std::size_t a = 0; a < 3; ++a) {
-        tnear = simd::max(ray.distance(node, ray.rows.near[a], ray.near_term, a), tnear);
-        if (!Fused || a > 0) tfar = simd::min(ray.distance(node, ray.rows.far[a], ray.far_term, a), tfar);
+        tnear = simd::max(ray.distance(node, ray.near_row[a], ray.near_term, a), tnear);
+        if (!Fused || a > 0) tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, a), tfar);
     }
     tfar = simd::min(tfar * float8(box_far_scale<float>), ray.box_tmax8);
     child_hits<float> h;
@@ -338,8 +315,8 @@ struct node_tester<T, S, I, true> {
             bool const negative = simd::movemask(r.inv_dir[a] < T(0.0f)) != 0;
             near_row[k] = near_plane_row(k, negative);
             far_row[k] = far_plane_row(k, negative);
-            near_term[k] = r.slabs.near_term[a];
-            far_term[k] = r.slabs.far_term[a];
+            near_term[k] = -r.slabs.near_offset[a];
+            far_term[k] = -r.slabs.far_offset[a];
             // The packet's bounds for the frustum test (all lanes: every one is finite here).
             inv_dir_lo[k] = simd::float8(simd::reduce_min(r.inv_dir[a]));
             inv_dir_hi[k] = simd::float8(simd::reduce_max(r.inv_dir[a]));

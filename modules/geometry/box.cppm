@@ -69,9 +69,8 @@ template <typename T, typename S>
 }
 
 // The per-ray constants of the fused slab test: the plane distances measured from the near and
-// far origins are fma(plane, inv_dir, term) with term = -(origin · inv_dir) rounded once per
-// ray, one instruction per plane instead of a subtraction and a product (Embree's form). The
-// terms are kept negated, as every test uses them (negation is exact: -(o · r) = (-o) · r).
+// far origins are fma(plane, inv_dir, -offset) with offset = origin · inv_dir rounded once per
+// ray, one instruction per plane instead of a subtraction and a product (Embree's form).
 // `usable` says, lane by lane, whether the fused form applies: inv_dir finite and non-zero, and
 // both offsets finite. Otherwise (a zero or infinite direction component, an origin so far out
 // that origin · inv_dir overflows) the ray keeps the subtraction form (intersect_slabs), whose
@@ -87,7 +86,7 @@ template <typename T, typename S>
 // whatever tmin and tmax are, so the 8-wide node test needs no mask of used slots in this form.
 template <typename T>
 struct slab_offsets {
-    vec3<T> near_term, far_term; // -(near_origin · inv_dir), -(far_origin · inv_dir), per axis
+    vec3<T> near_offset, far_offset;
     simd::mask_type_t<T> usable{};
 };
 
@@ -100,10 +99,10 @@ template <typename T>
     // component gives inv_dir 0 and offsets 0 on that axis: both forms then compute 0 there.)
     T finite(simd::scalar_type_t<T>(0));
     for (int axis = 0; axis < 3; ++axis) {
-        s.near_term[axis] = -(near_origin[axis] * inv_dir[axis]);
-        s.far_term[axis] = -(far_origin[axis] * inv_dir[axis]);
-        finite = finite + (inv_dir[axis] - inv_dir[axis]) + (s.near_term[axis] - s.near_term[axis]) +
-                 (s.far_term[axis] - s.far_term[axis]);
+        s.near_offset[axis] = near_origin[axis] * inv_dir[axis];
+        s.far_offset[axis] = far_origin[axis] * inv_dir[axis];
+        finite = finite + (inv_dir[axis] - inv_dir[axis]) + (s.near_offset[axis] - s.near_offset[axis]) +
+                 (s.far_offset[axis] - s.far_offset[axis]);
     }
     T const zero(simd::scalar_type_t<T>(0));
     s.usable = (finite == zero) & (inv_dir.x != zero) & (inv_dir.y != zero) & (inv_dir.z != zero);
@@ -122,8 +121,8 @@ template <typename T, typename S>
         auto const negative = inv_dir[axis] < T(0);
         T const near_plane = simd::select(negative, T(box.max[axis]), T(box.min[axis]));
         T const far_plane = simd::select(negative, T(box.min[axis]), T(box.max[axis]));
-        tnear = simd::max(simd::fma(near_plane, inv_dir[axis], offsets.near_term[axis]), tnear);
-        tfar = simd::min(simd::fma(far_plane, inv_dir[axis], offsets.far_term[axis]), tfar);
+        tnear = simd::max(simd::fma(near_plane, inv_dir[axis], -offsets.near_offset[axis]), tnear);
+        tfar = simd::min(simd::fma(far_plane, inv_dir[axis], -offsets.far_offset[axis]), tfar);
     }
     // One scaling after the minimum: rounding is monotonic, so this equals scaling each slab.
     tfar = simd::min(tfar * T(box_far_scale<S>), box_test_tmax(ray.tmax));
@@ -197,12 +196,12 @@ template <typename T, typename S>
         float4 const move = simd::max(delta, simd::abs(o) * float4(float(1.0 / 2097152.0)));
         float4 const towards_near = simd::select(inv < float4(0.0f), -move, move);
         float4 const near = o + towards_near, far = o - towards_near;
-        float4 const near_term = -(near * inv), far_term = -(far * inv);
-        float4 const finite = (inv - inv) + (near_term - near_term) + (far_term - far_term);
+        float4 const near_offset = near * inv, far_offset = far * inv;
+        float4 const finite = (inv - inv) + (near_offset - near_offset) + (far_offset - far_offset);
         near_origin = from_lanes(near);
         far_origin = from_lanes(far);
-        slabs.near_term = from_lanes(near_term);
-        slabs.far_term = from_lanes(far_term);
+        slabs.near_offset = from_lanes(near_offset);
+        slabs.far_offset = from_lanes(far_offset);
         slabs.usable = (simd::movemask((finite == float4(0.0f)) & (inv != float4(0.0f))) & 7u) == 7u;
     } else {
         box_margin_origins(ray, inv_dir, bounds, near_origin, far_origin);

@@ -182,8 +182,8 @@ prepared_ray<simd::scalar_type_t<T>> prepared_lane(prepared_ray<T> const& ray, i
     r.inv_dir = get_lane(ray.inv_dir, k);
     r.near_origin = get_lane(ray.near_origin, k);
     r.far_origin = get_lane(ray.far_origin, k);
-    r.slabs.near_term = get_lane(ray.slabs.near_term, k);
-    r.slabs.far_term = get_lane(ray.slabs.far_term, k);
+    r.slabs.near_offset = get_lane(ray.slabs.near_offset, k);
+    r.slabs.far_offset = get_lane(ray.slabs.far_offset, k);
     r.slabs.usable = ray.slabs.usable[k];
     return r;
 }
