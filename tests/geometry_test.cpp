@@ -687,25 +687,38 @@ TEST_CASE("ray/box slab test is conservative: it never misses a box the exact sl
 TEST_CASE("the traversal's box test (widened origins, fused where it applies) never misses a box the exact slab test hits") {
     // As above, through prepared_ray (box_margin_origins, then the fused form of slab_offsets
     // where the build has FMA), with origins near and far from the world origin: the fused form
-    // rounds origin · inv_dir once per ray, which the origin margins must absorb.
+    // rounds origin · inv_dir once per ray, which the origin margins must absorb; far from the
+    // world origin (|o| beyond 4 times the reach) the margin shifts the differences instead and
+    // the subtraction form serves the ray.
     random_source rng(61);
-    int exact_hits = 0, clear_misses = 0, fused = 0, nonzero = 0;
+    int exact_hits = 0, clear_misses = 0, fused = 0, fusable = 0, nonzero = 0, shifted_rays = 0;
     for (int i = 0; i < 60000; ++i) {
-        float const shift = (i % 3 == 0) ? 0.0f : (i % 3 == 1 ? 1000.0f : -65536.0f);
+        float const shifts[] = {0.0f, 1000.0f, -65536.0f, 1048576.0f};
+        float const shift = shifts[i % 4];
         auto const [box, r] = grazing_case(rng, i, shift);
         canopy::prepared_ray<float> prepared(r, false);
         prepared.widen_box_tests_for(box);
         bool const no_zero = r.direction.x != 0.0f && r.direction.y != 0.0f && r.direction.z != 0.0f;
         nonzero += no_zero ? 1 : 0;
-        // The fused form serves every ray with finite constants; rays along a plane keep the other.
-        CHECK(canopy::uses_fused_slabs(prepared) == (canopy::simd::native_fma && no_zero));
+        // Whether an axis's origin floor (2^-21·|o|) exceeds the margin (2^-19 of the reach).
+        float reach = 0.0f;
+        for (int a = 0; a < 3; ++a)
+            reach = std::max({reach, std::fabs(box.min[a] - r.origin[a]), std::fabs(box.max[a] - r.origin[a])});
+        bool shifted = false;
+        for (int a = 0; a < 3; ++a) shifted = shifted || std::fabs(r.origin[a]) * 0x1p-21f > reach * 0x1p-19f;
+        shifted_rays += shifted ? 1 : 0;
+        // The fused form serves every ray with finite constants and no shifted axis; rays along a
+        // plane and shifted rays keep the other.
+        CHECK(canopy::uses_fused_slabs(prepared) == (canopy::simd::native_fma && no_zero && !shifted));
         fused += canopy::uses_fused_slabs(prepared) ? 1 : 0;
+        fusable += (no_zero && !shifted) ? 1 : 0;
         long double gap = 0;
         bool const exact = exact_slab_hit(r, prepared.inv_dir, box, gap);
         auto const hr = intersect(prepared, box, prepared.inv_dir);
-        // Boxes grow by the origin margins (a few ulps of the coordinates, 2^-20 of the reach):
-        // a clear miss misses the box grown by more than that.
-        float const margin = 0x1p-18f * (std::fabs(shift) + 40.0f);
+        // Boxes grow by the origin margins (a few ulps of the coordinates, 2^-20 of the reach), or
+        // for shifted rays by the reach's share alone: a clear miss misses the box grown by more
+        // than that.
+        float const margin = 0x1p-18f * ((shifted ? 0.0f : std::fabs(shift)) + 40.0f);
         canopy::aabb const grown{box.min - vec3<float>(margin), box.max + vec3<float>(margin)};
         long double grown_gap = 0;
         exact_slab_hit(r, prepared.inv_dir, grown, grown_gap);
@@ -720,8 +733,12 @@ TEST_CASE("the traversal's box test (widened origins, fused where it applies) ne
     }
     CHECK(exact_hits > 5000);
     CHECK(clear_misses > 5000);
-    if constexpr (canopy::simd::native_fma) CHECK(fused == nonzero);
+    if constexpr (canopy::simd::native_fma) CHECK(fused == fusable);
     CHECK(nonzero > 59000);
+    // The boxes here lie within about 40 of their rays' origins: origins 1000 and more away from
+    // the world origin are shifted, those near it are not.
+    CHECK(shifted_rays > 40000);
+    CHECK(fusable > 10000);
 }
 
 TEST_CASE("a ray with an infinite direction component keeps the subtraction form of the box test") {

@@ -140,6 +140,8 @@ struct wide_box_ray {
             } else {
                 near_term[k] = simd::float8(ray.near_origin[a]);
                 far_term[k] = simd::float8(ray.far_origin[a]);
+                near_shift[k] = simd::float8(ray.near_shift[a]);
+                far_shift[k] = simd::float8(ray.far_shift[a]);
             }
             inv_dir[k] = simd::float8(ray.inv_dir[a]);
             bool const negative = ray.inv_dir[a] < 0.0f;
@@ -158,16 +160,19 @@ struct wide_box_ray {
     // The distance to plane row `row` of every child on axis a, near (or far) side.
     [[gnu::always_inline]] inline simd::float8 distance(wide_bvh_node<float> const& node, std::size_t row,
                                                         std::array<simd::float8, 3> const& term,
+                                                        std::array<simd::float8, 3> const& shift,
                                                         std::size_t a) const {
         auto const planes = simd::float8::load(node.planes[row].data());
         if constexpr (Fused)
             return simd::fma(planes, inv_dir[a], term[a]); // plane · r − origin · r, one rounding
         else
-            return (planes - term[a]) * inv_dir[a];
+            return ((planes - term[a]) + shift[a]) * inv_dir[a]; // canopy.geometry:box, intersect_slabs
     }
 
-    // Fused: minus the offsets; else the near and far origins (prepared_ray::widen_box_tests_for).
+    // Fused: minus the offsets; else the near and far origins (prepared_ray::widen_box_tests_for),
+    // and the shifts of the differences (unused in the fused form).
     std::array<simd::float8, 3> near_term, far_term, inv_dir;
+    std::array<simd::float8, 3> near_shift, far_shift;
     std::array<std::size_t, 3> near_row, far_row;
     simd::float8 tmin, box_tmax8;
     float box_tmax = 0.0f;
@@ -187,13 +192,13 @@ template <bool Fused>
     if constexpr (Fused) {
         // No NaN in this form (canopy.geometry:box, slab_offsets): the first far distance is the
         // minimum so far, with no +inf to start from.
-        tfar = ray.distance(node, ray.far_row[0], ray.far_term, 0);
+        tfar = ray.distance(node, ray.far_row[0], ray.far_term, ray.far_shift, 0);
     } else {
         tfar = float8(std::numeric_limits<float>::infinity());
     }
     for (std::size_t a = 0; a < 3; ++a) {
-        tnear = simd::max(ray.distance(node, ray.near_row[a], ray.near_term, a), tnear);
-        if (!Fused || a > 0) tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, a), tfar);
+        tnear = simd::max(ray.distance(node, ray.near_row[a], ray.near_term, ray.near_shift, a), tnear);
+        if (!Fused || a > 0) tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, ray.far_shift, a), tfar);
     }
     tfar = simd::min(tfar * float8(box_far_scale<float>), ray.box_tmax8);
     child_hits<float> h;

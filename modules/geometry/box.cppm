@@ -68,6 +68,29 @@ template <typename T, typename S>
     return {tnear <= tfar, tnear, tfar};
 }
 
+// The same with the margins of box_margin_origins in full: the distances to the near (far) planes
+// are ((plane − near_origin) + near_shift) · inv_dir (far likewise), the shift zero on every axis
+// whose margin is carried by the origins.
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+[[gnu::always_inline]] inline box_hit<T> intersect_slabs(basic_ray<T> const& ray, basic_aabb<S> const& box,
+                                                         vec3<T> const& inv_dir, vec3<T> const& near_origin,
+                                                         vec3<T> const& far_origin, vec3<T> const& near_shift,
+                                                         vec3<T> const& far_shift) {
+    T tnear = ray.tmin;
+    T tfar = box_test_tmax(ray.tmax);
+    for (int axis = 0; axis < 3; ++axis) {
+        auto const negative = inv_dir[axis] < T(0);
+        T const near_plane = simd::select(negative, T(box.max[axis]), T(box.min[axis]));
+        T const far_plane = simd::select(negative, T(box.min[axis]), T(box.max[axis]));
+        T const slab_near = ((near_plane - near_origin[axis]) + near_shift[axis]) * inv_dir[axis];
+        T const slab_far = ((far_plane - far_origin[axis]) + far_shift[axis]) * inv_dir[axis] * box_far_scale<S>;
+        tnear = simd::max(slab_near, tnear);
+        tfar = simd::min(slab_far, tfar);
+    }
+    return {tnear <= tfar, tnear, tfar};
+}
+
 // The per-ray constants of the fused slab test: the plane distances measured from the near and
 // far origins are fma(plane, inv_dir, -offset) with offset = origin · inv_dir rounded once per
 // ray, one instruction per plane instead of a subtraction and a product (Embree's form).
@@ -155,13 +178,24 @@ template <typename T, typename S>
 //
 // δ is 2^-20·R (16u·R) with R bounded by the largest distance from the origin to `bounds`. The
 // moved origin must differ from the origin by at least δ once rounded, so the move is at least
-// 2^-21·|o| (four ulps or more; rounded, at least 4u·|o|): near a far-away origin, boxes grow by
-// a few ulps of its coordinates. The fused slab test (slab_offsets) may take back u·|o| of the
-// move; what remains, at least max(16u·R, 4u·|o|) − u·|o| ≥ 12u·R, still exceeds 6u·R.
+// 2^-21·|o| (four ulps or more; rounded, at least 4u·|o|). The fused slab test (slab_offsets) may
+// take back u·|o| of the move; what remains, at least max(16u·R, 4u·|o|) − u·|o| ≥ 12u·R, still
+// exceeds 6u·R.
+//
+// Far from the world origin that floor would dominate: at |o| = 10^6 a move of 2^-21·|o| grows
+// every box by about 0.5, and a ray in a scene of that size visits most of its BVH. So on an axis
+// where 2^-21·|o| exceeds the margin the origin stays and the margin shifts the difference
+// instead: the near plane's distance is ((plane − o) + near_shift) · inv_dir with near_shift =
+// ∓margin (towards the ray's origin side), the far one's likewise with the opposite shift.
+// Their two roundings are relative to |plane − o| ≤ R (every plane of the BVH lies in `bounds`)
+// and to |plane − o| + margin: together about 2u·R, which leaves some 30u·R of the 32u·R margin
+// (2 · 2^-20 · R, below); the box stays grown by more than 6u·R, and the product with inv_dir
+// has Ize's analysis as before. Such rays cannot take the fused form (its rounding of o·(1/d) is
+// relative to |o|): their slab_offsets are not usable.
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 void box_margin_origins(basic_ray<T> const& ray, vec3<T> const& inv_dir, basic_aabb<S> const& bounds,
-                        vec3<T>& near_origin, vec3<T>& far_origin) {
+                        vec3<T>& near_origin, vec3<T>& far_origin, vec3<T>& near_shift, vec3<T>& far_shift) {
     // R in simd::reduce_max's order over the lanes (x, y, z, 0) of a 4-lane vector, so that
     // box_test_constants' vector form below gives the same bits, NaN included.
     vec3<T> m;
@@ -171,20 +205,28 @@ void box_margin_origins(basic_ray<T> const& ray, vec3<T> const& inv_dir, basic_a
     T const reach = simd::max(simd::max(m.x, m.z), simd::max(m.y, T(S(0))));
     T const delta = reach * T(S(1.0 / 524288.0)); // 2 · 2^-20 · R: rounding the move keeps ≥ half
     for (int axis = 0; axis < 3; ++axis) {
-        T const move = simd::max(delta, simd::abs(ray.origin[axis]) * T(S(1.0 / 2097152.0)));
-        T const towards_near = simd::select(inv_dir[axis] < T(0), -move, move);
+        T const floor = simd::abs(ray.origin[axis]) * T(S(1.0 / 2097152.0));
+        auto const shifted = floor > delta; // the origin stays, the margin shifts the difference
+        T const move = simd::select(shifted, T(S(0)), simd::max(delta, floor));
+        auto const negative = inv_dir[axis] < T(0);
+        T const towards_near = simd::select(negative, -move, move);
         near_origin[axis] = ray.origin[axis] + towards_near;
         far_origin[axis] = ray.origin[axis] - towards_near;
+        // −0 elsewhere: x + (−0) is x for every x, so unshifted axes keep the plain test's bits.
+        near_shift[axis] = simd::select(shifted, simd::select(negative, delta, -delta), T(S(-0.0)));
+        far_shift[axis] = simd::select(shifted, simd::select(negative, -delta, delta), T(S(-0.0)));
     }
 }
 
-// Both per-ray constants of traversal's box test: the widened origins (box_margin_origins) and the
-// fused test's offsets (fused_slab_offsets).
+// Both per-ray constants of traversal's box test: the widened origins and shifts
+// (box_margin_origins) and the fused test's offsets (fused_slab_offsets), usable only where no
+// axis is shifted.
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 [[gnu::always_inline]] inline void box_test_constants(basic_ray<T> const& ray, vec3<T> const& inv_dir,
                                                       basic_aabb<S> const& bounds, vec3<T>& near_origin,
-                                                      vec3<T>& far_origin, slab_offsets<T>& slabs) {
+                                                      vec3<T>& far_origin, vec3<T>& near_shift, vec3<T>& far_shift,
+                                                      slab_offsets<T>& slabs) {
     if constexpr (std::is_same_v<T, float> && simd::native_width<4>) {
         // One scalar ray: its three axes in the lanes of one vector (lane 3 holds zeros), the same
         // operations lane by lane as the two functions, so the same bits in a third of the
@@ -193,19 +235,27 @@ template <typename T, typename S>
         float4 const o = to_lanes(ray.origin), inv = to_lanes(inv_dir);
         float4 const m = simd::max(simd::abs(to_lanes(bounds.min) - o), simd::abs(to_lanes(bounds.max) - o));
         float4 const delta(simd::reduce_max(m) * float(1.0 / 524288.0));
-        float4 const move = simd::max(delta, simd::abs(o) * float4(float(1.0 / 2097152.0)));
-        float4 const towards_near = simd::select(inv < float4(0.0f), -move, move);
+        float4 const floor = simd::abs(o) * float4(float(1.0 / 2097152.0));
+        auto const shifted = floor > delta;
+        float4 const move = simd::select(shifted, float4(0.0f), simd::max(delta, floor));
+        auto const negative = inv < float4(0.0f);
+        float4 const towards_near = simd::select(negative, -move, move);
         float4 const near = o + towards_near, far = o - towards_near;
+        float4 const unshifted(-0.0f);
+        near_shift = from_lanes(simd::select(shifted, simd::select(negative, delta, -delta), unshifted));
+        far_shift = from_lanes(simd::select(shifted, simd::select(negative, -delta, delta), unshifted));
         float4 const near_offset = near * inv, far_offset = far * inv;
         float4 const finite = (inv - inv) + (near_offset - near_offset) + (far_offset - far_offset);
         near_origin = from_lanes(near);
         far_origin = from_lanes(far);
         slabs.near_offset = from_lanes(near_offset);
         slabs.far_offset = from_lanes(far_offset);
-        slabs.usable = (simd::movemask((finite == float4(0.0f)) & (inv != float4(0.0f))) & 7u) == 7u;
+        slabs.usable = (simd::movemask((finite == float4(0.0f)) & (inv != float4(0.0f)) & !shifted) & 7u) == 7u;
     } else {
-        box_margin_origins(ray, inv_dir, bounds, near_origin, far_origin);
+        box_margin_origins(ray, inv_dir, bounds, near_origin, far_origin, near_shift, far_shift);
         slabs = fused_slab_offsets(inv_dir, near_origin, far_origin);
+        T const zero(S(0));
+        slabs.usable = slabs.usable & (near_shift.x == zero) & (near_shift.y == zero) & (near_shift.z == zero);
     }
 }
 

@@ -149,7 +149,8 @@ struct prepared_ray : basic_ray<T> {
     // traversed with the same ray).
     template <typename S>
     [[gnu::always_inline]] inline void widen_box_tests_for(basic_aabb<S> const& bounds) {
-        box_test_constants(static_cast<basic_ray<T> const&>(*this), inv_dir, bounds, near_origin, far_origin, slabs);
+        box_test_constants(static_cast<basic_ray<T> const&>(*this), inv_dir, bounds, near_origin, far_origin, near_shift,
+                           far_shift, slabs);
     }
 
     // Out of line: called once per ray from inside traversal loops, where inlining it would only
@@ -163,6 +164,9 @@ struct prepared_ray : basic_ray<T> {
     watertight_shear<T> shear;
     vec3<T> inv_dir;
     vec3<T> near_origin, far_origin; // where box tests measure near and far planes from
+    // Added to plane − origin before the product (canopy.geometry:box, box_margin_origins): −0,
+    // which changes nothing, except on the axes of origins far from the world origin.
+    vec3<T> near_shift{T(-0.0f), T(-0.0f), T(-0.0f)}, far_shift{T(-0.0f), T(-0.0f), T(-0.0f)};
     slab_offsets<T> slabs; // the fused box test's constants (canopy.geometry:box); set by widen_box_tests_for
     vec3<T> permuted_origin;
     bool has_shear = false;
@@ -182,6 +186,8 @@ prepared_ray<simd::scalar_type_t<T>> prepared_lane(prepared_ray<T> const& ray, i
     r.inv_dir = get_lane(ray.inv_dir, k);
     r.near_origin = get_lane(ray.near_origin, k);
     r.far_origin = get_lane(ray.far_origin, k);
+    r.near_shift = get_lane(ray.near_shift, k);
+    r.far_shift = get_lane(ray.far_shift, k);
     r.slabs.near_offset = get_lane(ray.slabs.near_offset, k);
     r.slabs.far_offset = get_lane(ray.slabs.far_offset, k);
     r.slabs.usable = ray.slabs.usable[k];
@@ -226,14 +232,14 @@ template <typename T, typename S>
         if constexpr (simd::simd_width_v<T> != 1) {
             if (simd::any(ray.slabs.usable)) {
                 auto const fused = intersect_slabs_fused(ray, box, inv_dir, ray.slabs);
-                auto const plain = intersect_slabs(ray, box, inv_dir, ray.near_origin, ray.far_origin);
+                auto const plain = intersect_slabs(ray, box, inv_dir, ray.near_origin, ray.far_origin, ray.near_shift, ray.far_shift);
                 auto const& use = ray.slabs.usable;
                 return {(use & fused.hit) | (!use & plain.hit), simd::select(use, fused.tnear, plain.tnear),
                         simd::select(use, fused.tfar, plain.tfar)};
             }
         }
     }
-    return intersect_slabs(ray, box, inv_dir, ray.near_origin, ray.far_origin);
+    return intersect_slabs(ray, box, inv_dir, ray.near_origin, ray.far_origin, ray.near_shift, ray.far_shift);
 }
 
 // The watertight test from the triangle's vertices translated to the ray origin and permuted
