@@ -45,32 +45,9 @@ struct box_hit {
 // Ray against an axis-aligned box, with the distances to the near planes measured from
 // `near_origin` and those to the far planes from `far_origin` (both the ray's origin in the plain
 // test; see box_margin_origins for why they may differ). inv_dir must be 1 / ray.direction,
-// component-wise. hit: tmin ≤ tnear ≤ tfar ≤ tmax (in the conservative sense above).
-template <typename T, typename S>
-    requires std::is_same_v<simd::scalar_type_t<T>, S>
-[[gnu::always_inline]] inline box_hit<T> intersect_slabs(basic_ray<T> const& ray, basic_aabb<S> const& box,
-                                                         vec3<T> const& inv_dir, vec3<T> const& near_origin,
-                                                         vec3<T> const& far_origin) {
-    T tnear = ray.tmin;
-    T tfar = box_test_tmax(ray.tmax);
-    for (int axis = 0; axis < 3; ++axis) {
-        // Near/far by the sign of inv_dir (-0 → -inf counts as negative), so a NaN from a ray in
-        // a slab's boundary plane lands in a slot that max(NaN, x) / min(NaN, x) ignore: that
-        // slab then does not restrict the ray, as it should (the ray stays inside it).
-        auto const negative = inv_dir[axis] < T(0);
-        T const near_plane = simd::select(negative, T(box.max[axis]), T(box.min[axis]));
-        T const far_plane = simd::select(negative, T(box.min[axis]), T(box.max[axis]));
-        T const slab_near = (near_plane - near_origin[axis]) * inv_dir[axis];
-        T const slab_far = (far_plane - far_origin[axis]) * inv_dir[axis] * box_far_scale<S>;
-        tnear = simd::max(slab_near, tnear);
-        tfar = simd::min(slab_far, tfar);
-    }
-    return {tnear <= tfar, tnear, tfar};
-}
-
-// The same with the margins of box_margin_origins in full: the distances to the near (far) planes
-// are ((plane − near_origin) + near_shift) · inv_dir (far likewise), the shift zero on every axis
-// whose margin is carried by the origins.
+// component-wise. hit: tmin ≤ tnear ≤ tfar ≤ tmax (in the conservative sense above). The shifts
+// are added to plane − origin before the product: box_margin_origins' margins on the axes of
+// origins far from the world origin, −0 (which changes nothing) elsewhere.
 template <typename T, typename S>
     requires std::is_same_v<simd::scalar_type_t<T>, S>
 [[gnu::always_inline]] inline box_hit<T> intersect_slabs(basic_ray<T> const& ray, basic_aabb<S> const& box,
@@ -80,6 +57,9 @@ template <typename T, typename S>
     T tnear = ray.tmin;
     T tfar = box_test_tmax(ray.tmax);
     for (int axis = 0; axis < 3; ++axis) {
+        // Near/far by the sign of inv_dir (-0 → -inf counts as negative), so a NaN from a ray in
+        // a slab's boundary plane lands in a slot that max(NaN, x) / min(NaN, x) ignore: that
+        // slab then does not restrict the ray, as it should (the ray stays inside it).
         auto const negative = inv_dir[axis] < T(0);
         T const near_plane = simd::select(negative, T(box.max[axis]), T(box.min[axis]));
         T const far_plane = simd::select(negative, T(box.min[axis]), T(box.max[axis]));
@@ -89,6 +69,16 @@ template <typename T, typename S>
         tfar = simd::min(slab_far, tfar);
     }
     return {tnear <= tfar, tnear, tfar};
+}
+
+// Without shifts (x + (−0) is x: the compiler drops the additions).
+template <typename T, typename S>
+    requires std::is_same_v<simd::scalar_type_t<T>, S>
+[[gnu::always_inline]] inline box_hit<T> intersect_slabs(basic_ray<T> const& ray, basic_aabb<S> const& box,
+                                                         vec3<T> const& inv_dir, vec3<T> const& near_origin,
+                                                         vec3<T> const& far_origin) {
+    vec3<T> const none(T(S(-0.0)));
+    return intersect_slabs(ray, box, inv_dir, near_origin, far_origin, none, none);
 }
 
 // The per-ray constants of the fused slab test: the plane distances measured from the near and
