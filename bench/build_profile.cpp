@@ -49,28 +49,32 @@ namespace {
     return scene;
 }
 
-// FNV-1a over the tree in depth-first order: each node's box and primitive count, each leaf's
-// primitive ids (not the nodes' positions in the array, which depend on thread scheduling).
+// FNV-1a over the wide tree in depth-first order: each slot's box and primitive count, each
+// leaf's primitive ids (not the nodes' positions in the array, which depend on thread scheduling).
 std::uint64_t fingerprint(canopy::bvh<canopy::triangle> const& b) {
     std::uint64_t h = 14695981039346656037ull;
     auto const mix = [&](void const* data, std::size_t size) {
         auto const* p = static_cast<unsigned char const*>(data);
         for (std::size_t i = 0; i < size; ++i) h = (h ^ p[i]) * 1099511628211ull;
     };
-    if (b.nodes.empty()) return h;
+    if (b.empty()) return h;
     std::vector<std::uint32_t> stack{0};
     while (!stack.empty()) {
-        auto const& n = b.nodes[stack.back()];
+        auto const& w = b.wide_nodes[stack.back()];
         stack.pop_back();
-        mix(&n.bounds, sizeof n.bounds);
-        mix(&n.count, sizeof n.count);
-        if (n.is_leaf()) {
-            canopy::for_each_leaf_primitive(b, n.index, n.count, [&](canopy::triangle const& t) {
-                mix(&t.prim_id, sizeof t.prim_id);
-            });
-        } else {
-            stack.push_back(n.index + 1);
-            stack.push_back(n.index);
+        for (int k = canopy::bvh_width; k-- > 0;) {
+            if (!w.used(k)) continue;
+            auto const slot = std::size_t(k);
+            auto const box = w.child_bounds(k);
+            mix(&box, sizeof box);
+            mix(&w.count[slot], sizeof w.count[slot]);
+            if (w.count[slot] != 0) {
+                canopy::for_each_leaf_primitive(b, w.child[slot], w.count[slot], [&](canopy::triangle const& t) {
+                    mix(&t.prim_id, sizeof t.prim_id);
+                });
+            } else {
+                stack.push_back(w.child[slot]);
+            }
         }
     }
     return h;
@@ -140,8 +144,7 @@ int main(int argc, char** argv) {
         auto const built = build_mesh(scene.mesh, options);
         double const ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         auto const st = canopy::compute_stats(built);
-        std::size_t references = 0;
-        for (auto const& n : built.nodes) references += n.is_leaf() ? n.count : 0;
+        std::size_t const references = st.reference_count;
         std::printf("%s (%s, %zu threads): %zu triangles, %zu references, %zu nodes, depth %d, SAH %.4f, "
                     "fingerprint %016llx, %.1f ms (references %.1f, tree %.1f, wide nodes %.1f, leaves %.1f)\n",
                     scene_name.c_str(), built.quality == canopy::build_quality::high ? "high" : "fast", threads,

@@ -172,8 +172,7 @@ int main(int argc, char** argv) {
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - build_start).count();
     canopy::bvh<canopy::triangle> const& mesh = s->scene.meshes[0].accel;
     auto const st = canopy::compute_stats(mesh);
-    std::size_t references = 0;
-    for (auto const& n : mesh.nodes) references += n.is_leaf() ? n.count : 0;
+    std::size_t const references = st.reference_count;
     std::printf("mesh BVH (%s): %zu triangles, %zu references, %zu leaves (%.2f references each), %zu wide nodes, "
                 "%zu blocks, depth %d, SAH %.2f, %.1f bytes/triangle, compiled in %.0f ms\n",
                 mesh.quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,

@@ -55,7 +55,7 @@ bool same_vertices(triangle const& a, triangle const& b) {
     return eq(a.v0, b.v0) && eq(a.v1, b.v1) && eq(a.v2, b.v2);
 }
 
-// The primitives of one leaf (a binary node or a wide-node slot: index, count), each with a key
+// The primitives of one leaf (a wide-node slot: index, count), each with a key
 // that names it once in the whole BVH: its position in `primitives`, or, for triangle BVHs, whose
 // triangles live in blocks, its prim_id (the builder numbers them 0 … n-1). Returns false when
 // the leaf points outside the storage.
@@ -72,17 +72,19 @@ bool visit_leaf(canopy::bvh<Prim> const& b, std::uint32_t index, std::uint32_t c
     return true;
 }
 
-// What an independent walk from the root finds.
+// What an independent walk of the 8-wide tree (the layout traversal uses) finds.
 struct walk_result {
-    std::size_t nodes_reached = 0;
+    std::size_t nodes_reached = 0;        // wide nodes
     std::size_t leaves = 0;
+    std::size_t references = 0;           // primitives in the leaves
     std::size_t max_leaf = 0;
-    int levels = 0;                       // node levels on the deepest path
+    int levels = 0;                       // wide node levels on the deepest path
     std::vector<int> primitive_owners;    // how many leaves own each stored primitive
-    bool structure_ok = true;             // child/primitive indices in range, each node reached once
-    bool leaf_bounds_ok = true;           // a leaf's box holds its primitives' boxes
-    bool inner_bounds_ok = true;          // an inner node's box holds both children's boxes
-    double sah_cost = 0;                  // Σ area(node)/area(root) · (traversal or count · intersection)
+    bool structure_ok = true;             // indices in range, each node reached once, used slots first
+    bool unused_ok = true;                // unused slots: empty box, count 0, child invalid_id
+    bool bounds_ok = true;                // a slot's box holds its leaf's primitives or its node's slots
+    canopy::aabb root_union;              // union of the root's slot boxes
+    double sah_cost = 0;                  // Σ area/area(root) · (traversal per wide node, count · intersection per leaf)
 };
 
 // Depth first from node 0 of `count` nodes: visit(node, push) for each node reached once, push(child)
@@ -130,46 +132,10 @@ template <typename Prim>
 walk_result walk(canopy::bvh<Prim> const& b, canopy::sah_costs costs = {}) {
     walk_result w;
     w.primitive_owners.assign(b.primitive_count(), 0);
-    if (b.nodes.empty()) return w;
-    double const root_area = double(surface_area(b.nodes[0].bounds));
-    walk_nodes(b.nodes.size(), w, [&](std::uint32_t index, auto&& push) {
-        auto const& node = b.nodes[index];
-        double const rel = root_area > 0 ? double(surface_area(node.bounds)) / root_area : 1.0;
-        if (node.count > 0) {
-            ++w.leaves;
-            w.max_leaf = std::max<std::size_t>(w.max_leaf, node.count);
-            w.sah_cost += rel * double(costs.intersection) * double(node.count);
-            own_leaf(b, node.index, node.count, node.bounds, w, w.leaf_bounds_ok);
-        } else {
-            w.sah_cost += rel * double(costs.traversal);
-            if (std::size_t(node.index) + 1 >= b.nodes.size()) {
-                w.structure_ok = false;
-                return;
-            }
-            w.inner_bounds_ok = w.inner_bounds_ok && box_contains(node.bounds, b.nodes[node.index].bounds) &&
-                                box_contains(node.bounds, b.nodes[node.index + 1].bounds);
-            push(node.index);
-            push(node.index + 1);
-        }
-    });
-    return w;
-}
-
-// What an independent walk of the 8-wide tree (the layout traversal uses) finds.
-struct wide_walk_result {
-    std::size_t nodes_reached = 0;
-    int levels = 0;
-    std::vector<int> primitive_owners;
-    bool structure_ok = true;    // indices in range, each node reached once, used slots first
-    bool unused_ok = true;       // unused slots: empty box, count 0, child invalid_id
-    bool bounds_ok = true;       // a slot's box holds its leaf's primitives or its node's slots
-    canopy::aabb root_union;     // union of the root's slot boxes
-};
-
-template <typename Prim>
-wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
-    wide_walk_result w;
-    w.primitive_owners.assign(b.primitive_count(), 0);
+    if (b.wide_nodes.empty()) return w;
+    double const root_area = double(surface_area(b.bounds()));
+    auto const rel = [&](canopy::aabb const& box) { return root_area > 0 ? double(surface_area(box)) / root_area : 1.0; };
+    w.sah_cost = rel(b.bounds()) * double(costs.traversal);
     walk_nodes(b.wide_nodes.size(), w, [&](std::uint32_t index, auto&& push) {
         auto const& node = b.wide_nodes[index];
         bool seen_unused = false;
@@ -184,12 +150,19 @@ wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
             }
             w.structure_ok = w.structure_ok && !seen_unused;
             if (node.count[k] > 0) {
+                ++w.leaves;
+                w.references += node.count[k];
+                w.max_leaf = std::max<std::size_t>(w.max_leaf, node.count[k]);
+                w.sah_cost += rel(box) * double(costs.intersection) * double(node.count[k]);
                 own_leaf(b, node.child[k], node.count[k], box, w, w.bounds_ok);
             } else {
+                w.sah_cost += rel(box) * double(costs.traversal);
                 if (node.child[k] >= b.wide_nodes.size()) {
                     w.structure_ok = false;
                     continue;
                 }
+                // Children after their parents: refit's one reverse sweep relies on it.
+                w.structure_ok = w.structure_ok && node.child[k] > index;
                 auto const& child = b.wide_nodes[node.child[k]];
                 for (int j = 0; j < canopy::bvh_width; ++j)
                     if (child.used(j)) w.bounds_ok = w.bounds_ok && box_contains(box, child.child_bounds(j));
@@ -200,9 +173,11 @@ wide_walk_result walk_wide(canopy::bvh<Prim> const& b) {
     return w;
 }
 
+// The wide tree is well formed, reached whole, no deeper than b.depth, its root box the union of
+// the root's slots, and every primitive in exactly one leaf.
 template <typename Prim>
 void check_wide_tree(canopy::bvh<Prim> const& b) {
-    wide_walk_result const w = walk_wide(b);
+    walk_result const w = walk(b);
     CHECK(w.structure_ok);
     CHECK(w.unused_ok);
     CHECK(w.bounds_ok);
@@ -231,17 +206,11 @@ void check_build_contract(std::vector<triangle> const& input, mesh_bvh const& b,
     CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
 
     walk_result const w = walk(b);
-    CHECK(w.structure_ok);
-    CHECK(w.nodes_reached == b.nodes.size());
-    CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n == 1; }));
-    CHECK(w.leaf_bounds_ok);
-    CHECK(w.inner_bounds_ok);
-    CHECK(w.levels == b.depth);
     CHECK(b.depth <= options.max_depth);
     // The default leaf size of triangle BVHs is one block of triangles.
     int const max_leaf = options.max_leaf_size != 0 ? options.max_leaf_size : canopy::triangle_block_width;
     CHECK(w.max_leaf <= std::size_t(max_leaf));
-    CHECK(w.leaves * 2 - 1 == b.nodes.size());
+    CHECK(w.references == input.size());
     // The root box is the union of the primitives' boxes.
     canopy::aabb all;
     for (auto const& p : input) all = extend(all, get_bounds(p));
@@ -278,13 +247,9 @@ TEST_CASE("build_binned_sah respects max_depth, where leaves may exceed max_leaf
         canopy::bvh_build_options const options{.max_leaf_size = 2, .max_depth = max_depth};
         mesh_bvh const b = canopy::build_binned_sah(soup, options);
         walk_result const w = walk(b);
-        CHECK(w.structure_ok);
-        CHECK(w.levels == b.depth);
         CHECK(b.depth <= max_depth);
-        CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n == 1; }));
-        CHECK(w.leaf_bounds_ok);
-        CHECK(w.inner_bounds_ok);
-        if (max_depth == 1) CHECK(b.nodes.size() == 1);
+        // One binary level: the root is a leaf, the one slot of one wide node.
+        if (max_depth == 1) CHECK((b.wide_nodes.size() == 1 && w.leaves == 1));
         check_wide_tree(b);
     }
     // The default depth limit is met by a deep input too (a geometric progression of sizes).
@@ -302,8 +267,8 @@ TEST_CASE("an empty input gives an empty BVH, and queries on it miss") {
     std::vector<triangle> const none;
     mesh_bvh const b = canopy::build_binned_sah(none);
     CHECK(b.empty());
-    CHECK(b.nodes.empty());
     CHECK(b.wide_nodes.empty());
+    CHECK(b.root_bounds.empty());
     CHECK(b.primitive_count() == 0);
     CHECK(b.blocks.empty());
     CHECK(canopy::is_empty(b.bounds()));
@@ -335,16 +300,15 @@ TEST_CASE("compute_stats is consistent with the tree") {
         auto const s = canopy::compute_stats(b, costs);
         walk_result const w = walk(b, costs);
         INFO("max_leaf_size " << leaf);
-        CHECK(s.node_count == b.nodes.size());
+        CHECK(s.node_count == b.wide_nodes.size() + w.leaves);
         CHECK(s.leaf_count == w.leaves);
-        CHECK(s.leaf_count * 2 - 1 == s.node_count);
+        CHECK(s.reference_count == soup.size());
         CHECK(s.primitive_count == soup.size());
         CHECK(s.depth == b.depth);
         CHECK(s.max_leaf_size == w.max_leaf);
         CHECK(s.max_leaf_size <= std::size_t(leaf));
         CHECK(s.wide_node_count == b.wide_nodes.size());
-        CHECK(s.bytes == b.nodes.size() * sizeof(mesh_bvh::node_type) +
-                             b.wide_nodes.size() * sizeof(canopy::wide_bvh_node<float>) +
+        CHECK(s.bytes == sizeof(canopy::aabb) + b.wide_nodes.size() * sizeof(canopy::wide_bvh_node<float>) +
                              b.blocks.size() * sizeof(canopy::triangle_block));
         CHECK(s.bytes_per_primitive == Approx(double(s.bytes) / double(soup.size())));
         CHECK(s.sah_cost == Approx(w.sah_cost).epsilon(1e-9));
@@ -355,7 +319,7 @@ TEST_CASE("compute_stats is consistent with the tree") {
     // A single primitive: one leaf, depth 1.
     mesh_bvh const single = canopy::build_binned_sah(std::vector<triangle>{triangle{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 9}});
     auto const s = canopy::compute_stats(single);
-    CHECK(s.node_count == 1);
+    CHECK(s.node_count == 2); // one wide node, one leaf
     CHECK(s.leaf_count == 1);
     CHECK(s.depth == 1);
     CHECK(single.blocks[0].prim_id[0] == 0u);
@@ -401,9 +365,6 @@ TEST_CASE("non-finite vertices do not crash the builder") {
     walk_result const w = walk(b);
     CHECK(w.structure_ok);
     CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n == 1; }));
-    wide_walk_result const ww = walk_wide(b);
-    CHECK(ww.structure_ok);
-    CHECK(std::all_of(ww.primitive_owners.begin(), ww.primitive_owners.end(), [](int n) { return n == 1; }));
     std::vector<int> seen(soup.size(), 0);
     canopy::for_each_primitive(b, [&](triangle const& p) { ++seen[p.prim_id]; });
     CHECK(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
@@ -416,8 +377,7 @@ TEST_CASE("BVHs over spheres and over BVHs satisfy the same contract") {
     auto const b = canopy::build_binned_sah(spheres);
     walk_result const w = walk(b);
     CHECK(w.structure_ok);
-    CHECK(w.leaf_bounds_ok);
-    CHECK(w.inner_bounds_ok);
+    CHECK(w.bounds_ok);
     CHECK(w.max_leaf <= 4);
     std::vector<int> seen(spheres.size(), 0);
     for (auto const& p : b.primitives) ++seen[p.prim_id];
@@ -429,8 +389,7 @@ TEST_CASE("BVHs over spheres and over BVHs satisfy the same contract") {
     auto const roots = canopy::build_binned_sah(parts);
     walk_result const wr = walk(roots);
     CHECK(wr.structure_ok);
-    CHECK(wr.leaf_bounds_ok);
-    CHECK(wr.inner_bounds_ok);
+    CHECK(wr.bounds_ok);
     CHECK(roots.primitives.size() == 5);
     check_wide_tree(roots);
 }
@@ -498,19 +457,22 @@ std::vector<vec3<double>> points_of(triangle const& t, random_source& rng) {
 // index, and the boxes of the leaves that reference it cover it. Returns the number of references.
 std::size_t check_split_build(std::vector<triangle> const& input, mesh_bvh const& b, float budget, random_source& rng) {
     REQUIRE(b.primitive_count() == input.size());
+    // The wide tree: well formed, every triangle in one of its leaves or more (a leaf's box may
+    // bound only a clipped piece of a triangle, so it need not hold the triangle's box).
     walk_result const w = walk(b);
     CHECK(w.structure_ok);
-    CHECK(w.nodes_reached == b.nodes.size());
-    CHECK(w.inner_bounds_ok);
-    CHECK(w.levels == b.depth);
-    CHECK(w.leaves * 2 - 1 == b.nodes.size());
+    CHECK(w.unused_ok);
+    CHECK(w.nodes_reached == b.wide_nodes.size());
+    CHECK(w.levels <= b.depth);
+    CHECK(std::all_of(w.primitive_owners.begin(), w.primitive_owners.end(), [](int n) { return n >= 1; }));
+    CHECK(box_contains(w.root_union, b.bounds()));
+    CHECK(box_contains(b.bounds(), w.root_union));
     std::vector<std::vector<canopy::aabb>> leaf_boxes(input.size());
     std::size_t references = 0;
     bool ids_ok = true, once_per_leaf = true;
-    for (auto const& node : b.nodes) {
-        if (!node.is_leaf()) continue;
+    canopy::for_each_leaf(b, [&](std::uint32_t child, std::uint32_t count, canopy::aabb const& leaf_box) {
         std::vector<std::uint32_t> in_leaf;
-        canopy::for_each_leaf_primitive(b, node.index, node.count, [&](triangle const& p) {
+        canopy::for_each_leaf_primitive(b, child, count, [&](triangle const& p) {
             ++references;
             if (p.prim_id >= input.size()) {
                 ids_ok = false;
@@ -519,9 +481,10 @@ std::size_t check_split_build(std::vector<triangle> const& input, mesh_bvh const
             ids_ok = ids_ok && same_vertices(p, input[p.prim_id]) && p.geom_id == input[p.prim_id].geom_id;
             once_per_leaf = once_per_leaf && std::find(in_leaf.begin(), in_leaf.end(), p.prim_id) == in_leaf.end();
             in_leaf.push_back(p.prim_id);
-            leaf_boxes[p.prim_id].push_back(node.bounds);
+            leaf_boxes[p.prim_id].push_back(leaf_box);
         });
-    }
+    });
+    CHECK(w.references == references);
     CHECK(ids_ok);
     CHECK(once_per_leaf);
     CHECK(references <= input.size() + std::size_t(double(input.size()) * double(budget)));
@@ -540,13 +503,6 @@ std::size_t check_split_build(std::vector<triangle> const& input, mesh_bvh const
     }
     CHECK(unreferenced == 0);
     CHECK(uncovered == 0);
-    // The wide tree: well formed, every triangle in one of its leaves or more.
-    wide_walk_result const ww = walk_wide(b);
-    CHECK(ww.structure_ok);
-    CHECK(ww.unused_ok);
-    CHECK(ww.nodes_reached == b.wide_nodes.size());
-    CHECK(std::all_of(ww.primitive_owners.begin(), ww.primitive_owners.end(), [](int n) { return n >= 1; }));
-    CHECK(box_contains(ww.root_union, b.bounds()));
     return references;
 }
 
@@ -587,15 +543,28 @@ namespace {
 // their arrays may differ: they follow the order in which threads finished).
 template <typename Prim>
 bool same_tree(canopy::bvh<Prim> const& a, canopy::bvh<Prim> const& b, std::uint32_t i = 0, std::uint32_t j = 0) {
-    if (a.nodes.empty() || b.nodes.empty()) return a.nodes.empty() && b.nodes.empty();
-    auto const& x = a.nodes[i];
-    auto const& y = b.nodes[j];
-    if (std::memcmp(&x.bounds, &y.bounds, sizeof x.bounds) != 0 || x.count != y.count) return false;
-    if (!x.is_leaf()) return same_tree(a, b, x.index, y.index) && same_tree(a, b, x.index + 1, y.index + 1);
-    std::vector<std::uint32_t> ids_a, ids_b;
-    canopy::for_each_leaf_primitive(a, x.index, x.count, [&](Prim const& t) { ids_a.push_back(t.prim_id); });
-    canopy::for_each_leaf_primitive(b, y.index, y.count, [&](Prim const& t) { ids_b.push_back(t.prim_id); });
-    return ids_a == ids_b;
+    if (a.empty() || b.empty()) return a.empty() && b.empty();
+    if (i == 0 && j == 0) {
+        auto const ra = a.bounds(), rb = b.bounds();
+        if (std::memcmp(&ra, &rb, sizeof ra) != 0) return false;
+    }
+    auto const& x = a.wide_nodes[i];
+    auto const& y = b.wide_nodes[j];
+    if (std::memcmp(&x.planes, &y.planes, sizeof x.planes) != 0 || x.count != y.count) return false;
+    for (int k = 0; k < canopy::bvh_width; ++k) {
+        auto const slot = std::size_t(k);
+        if (x.used(k) != y.used(k)) return false;
+        if (!x.used(k)) continue;
+        if (x.count[slot] == 0) {
+            if (!same_tree(a, b, x.child[slot], y.child[slot])) return false;
+            continue;
+        }
+        std::vector<std::uint32_t> ids_a, ids_b;
+        canopy::for_each_leaf_primitive(a, x.child[slot], x.count[slot], [&](Prim const& t) { ids_a.push_back(t.prim_id); });
+        canopy::for_each_leaf_primitive(b, y.child[slot], y.count[slot], [&](Prim const& t) { ids_b.push_back(t.prim_id); });
+        if (ids_a != ids_b) return false;
+    }
+    return true;
 }
 
 } // namespace
@@ -627,9 +596,7 @@ TEST_CASE("the same tree on one thread and on two, whatever the parallel thresho
         return canopy::build_binned_sah(slivers, {.parallel_threshold = threshold, .quality = canopy::build_quality::high});
     };
     auto const chunked = build(16), whole = build(std::size_t(1) << 30);
-    std::size_t references = 0;
-    for (auto const& n : chunked.nodes) references += n.is_leaf() ? n.count : 0;
-    CHECK(references > slivers.size()); // spatial splits did happen
+    CHECK(canopy::compute_stats(chunked).reference_count > slivers.size()); // spatial splits did happen
     CHECK(same_tree(chunked, whole));
 }
 
@@ -743,7 +710,7 @@ TEST_CASE("build_quality::automatic: the sliver box share, by hand, and the qual
     // The automatic build of the slivers is the high build, node for node.
     auto const automatic = canopy::build_binned_sah(slivers);
     auto const high = canopy::build_binned_sah(slivers, {.quality = build_quality::high});
-    CHECK(automatic.nodes.size() == high.nodes.size());
+    CHECK(same_tree(automatic, high));
     CHECK(canopy::compute_stats(automatic).sah_cost == canopy::compute_stats(high).sah_cost);
 }
 
@@ -752,11 +719,10 @@ TEST_CASE("build_quality::automatic: the sliver box share, by hand, and the qual
 
 namespace {
 
-// The tree's shape: every node's (index, count), binary then wide.
+// The tree's shape: every wide node's children and counts.
 template <typename Prim>
 std::vector<std::uint32_t> tree_shape(canopy::bvh<Prim> const& b) {
     std::vector<std::uint32_t> shape;
-    for (auto const& n : b.nodes) shape.insert(shape.end(), {n.index, n.count});
     for (auto const& w : b.wide_nodes) {
         shape.insert(shape.end(), w.child.begin(), w.child.end());
         shape.insert(shape.end(), w.count.begin(), w.count.end());
@@ -764,23 +730,19 @@ std::vector<std::uint32_t> tree_shape(canopy::bvh<Prim> const& b) {
     return shape;
 }
 
-// The boxes of a refitted tree hold their contents in both node arrays, the root's box is
-// exactly the union of the moved triangles', every leaf stores moved[prim_id] with its ids, and
-// a block lane is testable exactly when its triangle is not degenerate.
+// The boxes of a refitted tree hold their contents, the root's box is exactly the union of the
+// moved triangles', every leaf stores moved[prim_id] with its ids, and a block lane is testable
+// exactly when its triangle is not degenerate.
 void check_refitted(mesh_bvh const& b, std::vector<triangle> const& moved) {
     walk_result const w = walk(b);
     CHECK(w.structure_ok);
-    CHECK(w.leaf_bounds_ok);
-    CHECK(w.inner_bounds_ok);
-    wide_walk_result const ww = walk_wide(b);
-    CHECK(ww.structure_ok);
-    CHECK(ww.bounds_ok);
+    CHECK(w.bounds_ok);
     canopy::aabb all;
     for (auto const& t : moved) all = extend(all, get_bounds(t));
     CHECK(box_contains(b.bounds(), all));
     CHECK(box_contains(all, b.bounds()));
-    CHECK(box_contains(ww.root_union, all));
-    CHECK(box_contains(all, ww.root_union));
+    CHECK(box_contains(w.root_union, all));
+    CHECK(box_contains(all, w.root_union));
     bool stored_ok = true;
     canopy::for_each_primitive(b, [&](triangle const& p) {
         stored_ok = stored_ok && p.prim_id < moved.size() && same_vertices(p, moved[p.prim_id]) &&
@@ -797,7 +759,7 @@ void check_refitted(mesh_bvh const& b, std::vector<triangle> const& moved) {
 
 } // namespace
 
-TEST_CASE("refit keeps the tree and rebounds the moved triangles in the binary and the wide nodes") {
+TEST_CASE("refit keeps the tree and rebounds the moved triangles in the wide nodes and the root box") {
     random_source rng(91);
     std::vector<std::pair<char const*, std::vector<triangle>>> const meshes{
         {"soup", test_support::triangle_soup(rng, 2000, 4.0f, 0.5f)}, {"slivers", test_support::sliver_mesh()}};
@@ -828,11 +790,9 @@ TEST_CASE("refit of unmoved geometry gives back a fast build's boxes bit for bit
     mesh_bvh const built = canopy::build_binned_sah(mesh, {.quality = canopy::build_quality::fast});
     mesh_bvh b = built;
     canopy::refit(b, mesh);
-    REQUIRE(b.nodes.size() == built.nodes.size());
     REQUIRE(b.wide_nodes.size() == built.wide_nodes.size());
-    bool same = true;
-    for (std::size_t i = 0; i < b.nodes.size(); ++i)
-        same = same && std::memcmp(&b.nodes[i], &built.nodes[i], sizeof(b.nodes[i])) == 0;
+    auto const root = b.bounds(), built_root = built.bounds();
+    bool same = std::memcmp(&root, &built_root, sizeof root) == 0;
     for (std::size_t i = 0; i < b.wide_nodes.size(); ++i)
         same = same && std::memcmp(&b.wide_nodes[i], &built.wide_nodes[i], sizeof(b.wide_nodes[i])) == 0;
     CHECK(same);
@@ -843,9 +803,13 @@ TEST_CASE("refit of unmoved geometry gives back a fast build's boxes bit for bit
     mesh_bvh h = high;
     canopy::refit(h, mesh);
     bool contains = true, some_larger = false;
-    for (std::size_t i = 0; i < h.nodes.size(); ++i) {
-        contains = contains && box_contains(h.nodes[i].bounds, high.nodes[i].bounds);
-        some_larger = some_larger || !box_contains(high.nodes[i].bounds, h.nodes[i].bounds);
+    for (std::size_t i = 0; i < h.wide_nodes.size(); ++i) {
+        for (int k = 0; k < canopy::bvh_width; ++k) {
+            if (!h.wide_nodes[i].used(k)) continue;
+            auto const now = h.wide_nodes[i].child_bounds(k), then = high.wide_nodes[i].child_bounds(k);
+            contains = contains && box_contains(now, then);
+            some_larger = some_larger || !box_contains(then, now);
+        }
     }
     CHECK(contains);
     CHECK(some_larger);
@@ -871,10 +835,8 @@ TEST_CASE("refit refuses a mesh of another size, and refits an empty BVH and a B
     canopy::aabb const stale = top.bounds();
     canopy::refit(top);
     walk_result const w = walk(top);
-    CHECK(w.leaf_bounds_ok);
-    CHECK(w.inner_bounds_ok);
-    wide_walk_result const ww = walk_wide(top);
-    CHECK(ww.bounds_ok);
+    CHECK(w.structure_ok);
+    CHECK(w.bounds_ok);
     canopy::aabb all;
     for (auto const& inst : instances) all = extend(all, get_bounds(inst));
     CHECK(box_contains(top.bounds(), all));

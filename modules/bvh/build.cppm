@@ -110,8 +110,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     ctx.nodes = &nodes;
     detail::bin_scratch<S> scratch(options.bins);
     detail::build_node(ctx, scratch, 0, 0, n, 0, detail::bounds_of(ctx, 0, n));
-    result.nodes.assign(nodes.begin(), nodes.begin() + std::ptrdiff_t(ctx.node_count.load()));
-    nodes = {};
+    std::span<bvh_node<S> const> const tree(nodes.data(), ctx.node_count.load());
     result.depth = ctx.depth.load();
     std::vector<std::uint32_t> order(n);
     parallel_for_chunks(n, 4096, [&](std::size_t first, std::size_t last) {
@@ -119,7 +118,7 @@ bvh<Prim> build_binned_sah(std::span<Prim const> prims, bvh_build_options option
     });
     ctx.refs = {};
     result.build_phases.tree = detail::lap(clock);
-    detail::finish_build(result, prims, order);
+    detail::finish_build(result, tree, prims, order);
     return result;
 }
 

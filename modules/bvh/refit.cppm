@@ -6,9 +6,9 @@
 // refit(b, moved) rewrites the stored primitives from moved[prim_id] (prim_id is the input index;
 // the stored prim_id and geom_id are kept, only the geometry changes; triangle blocks get their
 // `testable` bits recomputed), then recomputes every box bottom-up: each leaf's box is the union
-// of its primitives' boxes, each inner binary node's the union of its two children, each wide
-// node's child boxes the union of the child's own slots (the builders store children after their
-// parents in both node arrays, so one reverse sweep of each array sees children first).
+// of its primitives' boxes, each inner slot's the union of its wide node's slots (the builder
+// stores wide nodes after their parents, so one reverse sweep sees children first), the root's
+// the union of the root node's slots.
 // refit(b) does the same from the primitives b already stores: for a BVH of instances, the boxes
 // come from the instances' BVHs as they are now, so refit the levels from the bottom up.
 //
@@ -25,8 +25,8 @@
 // threshold (default_rebuild_drift, 1.5: the expected traversal cost of a random ray is then half
 // as high again as after the build, while a rebuild costs about ten refits).
 //
-// Leaves are refitted in parallel (bvh:parallel); the inner-node sweeps run on one thread (an
-// inner node per leaf or so, two boxes merged each).
+// Leaves are refitted in parallel (bvh:parallel), wide node by wide node; the inner-node sweep
+// runs on one thread (a wide node per 4 leaves or so, 8 boxes merged each).
 module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
@@ -44,47 +44,50 @@ import :instance;
 
 namespace canopy::detail {
 
-// The leaves' boxes from what they store, then every inner box bottom-up, in both node arrays.
+// The box of a wide node: the union of its used slots.
+template <typename S>
+basic_aabb<S> node_bounds(wide_bvh_node<S> const& w) {
+    basic_aabb<S> box;
+    for (int j = 0; j < bvh_width; ++j)
+        if (w.used(j)) box = extend(box, w.child_bounds(j));
+    return box;
+}
+
+template <typename S>
+void set_slot_bounds(wide_bvh_node<S>& w, std::size_t slot, basic_aabb<S> const& box) {
+    for (std::size_t a = 0; a < 3; ++a) {
+        w.planes[a][slot] = box.min[int(a)];
+        w.planes[3 + a][slot] = box.max[int(a)];
+    }
+}
+
+// The leaves' boxes from what they store, then every inner box bottom-up, then the root's.
 template <typename Prim>
 void refit_boxes(bvh<Prim>& b) {
     using S = typename bvh<Prim>::value_type;
-    if (b.nodes.empty()) return;
-    // A leaf's box, by the leaf's first block (triangle BVHs) or first primitive: the binary
-    // leaves and the wide nodes' leaf slots point at their leaves the same way.
-    std::vector<basic_aabb<S>> leaf_box(stores_triangle_blocks_v<Prim> ? b.blocks.size() : b.primitives.size());
-    parallel_for_chunks(b.nodes.size(), 1024, [&](std::size_t first, std::size_t last) {
+    if (b.empty()) return;
+    parallel_for_chunks(b.wide_nodes.size(), 256, [&](std::size_t first, std::size_t last) {
         for (std::size_t i = first; i < last; ++i) {
-            auto& n = b.nodes[i];
-            if (!n.is_leaf()) continue;
-            basic_aabb<S> box;
-            for_each_leaf_primitive(b, n.index, n.count, [&](Prim const& p) { box = extend(box, get_bounds(p)); });
-            n.bounds = box;
-            leaf_box[n.index] = box;
+            auto& w = b.wide_nodes[i];
+            for (int k = 0; k < bvh_width; ++k) {
+                auto const slot = std::size_t(k);
+                if (w.count[slot] == 0) continue;
+                basic_aabb<S> box;
+                for_each_leaf_primitive(b, w.child[slot], w.count[slot], [&](Prim const& p) { box = extend(box, get_bounds(p)); });
+                set_slot_bounds(w, slot, box);
+            }
         }
     });
-    for (std::size_t i = b.nodes.size(); i-- > 0;) {
-        auto& n = b.nodes[i];
-        if (!n.is_leaf()) n.bounds = extend(b.nodes[n.index].bounds, b.nodes[n.index + 1].bounds);
-    }
     for (std::size_t i = b.wide_nodes.size(); i-- > 0;) {
         auto& w = b.wide_nodes[i];
         for (int k = 0; k < bvh_width; ++k) {
-            if (!w.used(k)) continue;
             auto const slot = std::size_t(k);
-            basic_aabb<S> box;
-            if (w.count[slot] != 0) {
-                box = leaf_box[w.child[slot]];
-            } else {
-                auto const& child = b.wide_nodes[w.child[slot]];
-                for (int j = 0; j < bvh_width; ++j)
-                    if (child.used(j)) box = extend(box, child.child_bounds(j));
-            }
-            for (std::size_t a = 0; a < 3; ++a) {
-                w.planes[a][slot] = box.min[int(a)];
-                w.planes[3 + a][slot] = box.max[int(a)];
-            }
+            if (w.used(k) && w.count[slot] == 0) set_slot_bounds(w, slot, node_bounds(b.wide_nodes[w.child[slot]]));
         }
     }
+    // In place: instances point at this box (bvh_storage).
+    if (b.root_bounds.empty()) b.root_bounds.resize(1);
+    b.root_bounds[0] = node_bounds(b.wide_nodes[0]);
 }
 
 } // namespace canopy::detail

@@ -633,13 +633,12 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     ctx.object.nodes = &nodes;
     spatial_scratch<S> scratch(options.bins);
     build_spatial_node(ctx, scratch, 0, 0, n, 0, budget);
-    result.nodes.assign(nodes.begin(), nodes.begin() + std::ptrdiff_t(ctx.object.node_count.load()));
-    nodes = {};
+    std::span<bvh_node<S>> const tree(nodes.data(), ctx.object.node_count.load());
     result.depth = ctx.object.depth.load();
     // The leaves' references, in node order, without the slack left between them.
     std::vector<std::uint32_t> order;
     order.reserve(n + budget);
-    for (auto& node : result.nodes) {
+    for (auto& node : tree) {
         if (!node.is_leaf()) continue;
         auto const first = std::uint32_t(order.size());
         for (std::uint32_t i = node.index; i < node.index + node.count; ++i) order.push_back(refs[i].index);
@@ -647,7 +646,7 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     }
     refs = {};
     result.build_phases.tree = lap(clock);
-    finish_build(result, prims, order);
+    finish_build(result, std::span<bvh_node<S> const>(tree), prims, order);
     return result;
 }
 

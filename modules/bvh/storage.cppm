@@ -3,7 +3,8 @@
 // The builder produces a binary BVH (nodes in one array, the two children of an inner node side
 // by side), then collapses it into an 8-wide BVH with the children's boxes stored as
 // structure-of-arrays, which is what traversal walks: one node fetch tests eight boxes at once
-// (Wald et al. 2008, "Getting Rid of Packets"; Embree's BVH8). Primitives are stored once (a
+// (Wald et al. 2008, "Getting Rid of Packets"; Embree's BVH8). Only the wide nodes are kept (the
+// binary tree is the builder's scratch): refit, the statistics and the SAH work on them. Primitives are stored once (a
 // triangle of a build_quality::high BVH once per leaf holding it), reordered so that each leaf
 // owns a contiguous range. Depth never exceeds bvh_max_depth (the
 // builder enforces it), which bounds every traversal stack.
@@ -32,6 +33,7 @@ inline constexpr int bvh_max_depth = 64;
 template <typename Prim>
 using bounds_value_t = typename decltype(get_bounds(std::declval<Prim const&>()))::value_type;
 
+// A node of the builder's binary tree (canopy.bvh:build, canopy.bvh:wide).
 template <typename S>
 struct bvh_node {
     basic_aabb<S> bounds;
@@ -115,26 +117,27 @@ template <typename Prim>
 struct bvh {
     using primitive_type = Prim;
     using value_type = bounds_value_t<Prim>;
-    using node_type = bvh_node<value_type>;
     using acceleration_structure_tag = void;
 
-    std::vector<node_type> nodes;   // binary tree, nodes[0] is the root; empty for an empty BVH
-    wide_node_array<value_type> wide_nodes; // the same tree, 8-wide; [0] is the root
+    wide_node_array<value_type> wide_nodes; // the tree, 8-wide; [0] is the root; empty for an empty BVH
+    // The root's box, the one element of a heap buffer (empty for an empty BVH): instances point at
+    // it (bvh_storage), so that it stays where it is when the bvh object moves and they see refits.
+    std::vector<basic_aabb<value_type>> root_bounds;
     std::vector<Prim> primitives;   // in leaf order; empty when stores_triangle_blocks_v<Prim>
     std::vector<triangle_block, large_array_allocator<triangle_block>>
         blocks;                     // stores_triangle_blocks_v<Prim>: the leaves' triangles
     std::size_t size = 0;           // number of input primitives (leaves may hold more references: build_quality::high)
-    int depth = 0;                  // number of node levels (a single leaf: 1)
+    int depth = 0;                  // levels of the builder's binary tree (a single leaf: 1); the wide tree has no more
     build_quality quality = build_quality::fast; // how it was built (fast or high, automatic resolved)
     build_phase_times build_phases;              // where the build's time went
 
-    bool empty() const { return nodes.empty(); }
+    bool empty() const { return wide_nodes.empty(); }
     std::size_t primitive_count() const { return size; }
-    basic_aabb<value_type> bounds() const { return nodes.empty() ? basic_aabb<value_type>{} : nodes[0].bounds; }
+    basic_aabb<value_type> bounds() const { return root_bounds.empty() ? basic_aabb<value_type>{} : root_bounds[0]; }
 };
 
-// Calls f(primitive) for each primitive of the leaf that a binary node or a wide node's slot
-// (index, count) points to, in leaf order: from the triangle blocks of triangle BVHs, else from
+// Calls f(primitive) for each primitive of the leaf that a wide node's slot (child, count) or a
+// binary node (index, count) points to, in leaf order: from the triangle blocks of triangle BVHs, else from
 // `primitives`.
 template <typename Prim, typename F>
 void for_each_leaf_primitive(bvh<Prim> const& b, std::uint32_t child, std::uint32_t count, F&& f) {
@@ -146,13 +149,21 @@ void for_each_leaf_primitive(bvh<Prim> const& b, std::uint32_t child, std::uint3
     }
 }
 
+// Calls f(child, count, box) for each leaf of b (a wide node's slot with count ≥ 1), in the
+// order of the wide nodes.
+template <typename Prim, typename F>
+void for_each_leaf(bvh<Prim> const& b, F&& f) {
+    for (auto const& w : b.wide_nodes)
+        for (int k = 0; k < bvh_width; ++k)
+            if (w.count[std::size_t(k)] != 0) f(w.child[std::size_t(k)], w.count[std::size_t(k)], w.child_bounds(k));
+}
+
 // Calls f(primitive) once for each primitive reference of b, leaf by leaf: once per primitive,
 // except in triangle BVHs built with spatial splits (build_quality::high), where a triangle is
 // visited once per leaf holding it.
 template <typename Prim, typename F>
 void for_each_primitive(bvh<Prim> const& b, F&& f) {
-    for (auto const& n : b.nodes)
-        if (n.is_leaf()) for_each_leaf_primitive(b, n.index, n.count, f);
+    for_each_leaf(b, [&](std::uint32_t child, std::uint32_t count, auto const&) { for_each_leaf_primitive(b, child, count, f); });
 }
 
 // A BVH's bounds as a primitive of an enclosing structure (a list of BVHs, multiple roots).
@@ -186,40 +197,51 @@ struct bvh_build_options {
     float split_node_overlap = 0.1f;
 };
 
+// A BVH's statistics, over the wide tree that traversal walks.
 struct bvh_stats {
-    std::size_t node_count = 0;
+    std::size_t node_count = 0;      // wide nodes + leaves
     std::size_t leaf_count = 0;
-    std::size_t primitive_count = 0;
-    int depth = 0;
+    std::size_t primitive_count = 0; // input primitives
+    std::size_t reference_count = 0; // primitives in the leaves (more than primitive_count after spatial splits)
+    int depth = 0;                   // bvh::depth
     std::size_t max_leaf_size = 0;
-    double sah_cost = 0.0;           // expected cost of a random ray hitting the root box
+    // Expected cost of a random ray hitting the root box: Σ over wide nodes of area/root area ×
+    // traversal, plus Σ over leaves of area/root area × count × intersection.
+    double sah_cost = 0.0;
     std::size_t wide_node_count = 0;
-    std::size_t bytes = 0;           // binary nodes + wide nodes + primitives + triangle blocks
+    std::size_t bytes = 0;           // wide nodes + root box + primitives + triangle blocks
     double bytes_per_primitive = 0.0;
 };
 
 template <typename Prim>
 bvh_stats compute_stats(bvh<Prim> const& b, sah_costs costs = {}) {
+    using S = typename bvh<Prim>::value_type;
     bvh_stats s;
-    s.node_count = b.nodes.size();
     s.primitive_count = b.primitive_count();
     s.depth = b.depth;
     s.wide_node_count = b.wide_nodes.size();
-    s.bytes = b.nodes.size() * sizeof(typename bvh<Prim>::node_type) +
-              b.wide_nodes.size() * sizeof(wide_bvh_node<typename bvh<Prim>::value_type>) +
+    s.bytes = b.wide_nodes.size() * sizeof(wide_bvh_node<S>) + b.root_bounds.size() * sizeof(basic_aabb<S>) +
               b.primitives.size() * sizeof(Prim) + b.blocks.size() * sizeof(triangle_block);
-    if (b.nodes.empty()) return s;
-    double const root_area = surface_area(b.nodes[0].bounds);
-    for (auto const& n : b.nodes) {
-        double const rel = root_area > 0.0 ? double(surface_area(n.bounds)) / root_area : 1.0;
-        if (n.is_leaf()) {
+    if (b.empty()) return s;
+    double const root_area = surface_area(b.bounds());
+    auto const rel = [&](basic_aabb<S> const& box) { return root_area > 0.0 ? double(surface_area(box)) / root_area : 1.0; };
+    // The root by its box; every other wide node by its slot in its parent.
+    s.sah_cost = rel(b.bounds()) * costs.traversal;
+    for (auto const& w : b.wide_nodes) {
+        for (int k = 0; k < bvh_width; ++k) {
+            auto const slot = std::size_t(k);
+            if (!w.used(k)) continue;
+            if (w.count[slot] == 0) {
+                s.sah_cost += rel(w.child_bounds(k)) * costs.traversal;
+                continue;
+            }
             ++s.leaf_count;
-            s.max_leaf_size = std::max<std::size_t>(s.max_leaf_size, n.count);
-            s.sah_cost += rel * costs.intersection * n.count;
-        } else {
-            s.sah_cost += rel * costs.traversal;
+            s.reference_count += w.count[slot];
+            s.max_leaf_size = std::max<std::size_t>(s.max_leaf_size, w.count[slot]);
+            s.sah_cost += rel(w.child_bounds(k)) * costs.intersection * w.count[slot];
         }
     }
+    s.node_count = s.wide_node_count + s.leaf_count;
     s.bytes_per_primitive = s.primitive_count ? double(s.bytes) / double(s.primitive_count) : 0.0;
     return s;
 }

@@ -65,8 +65,8 @@ struct bvh_storage {
 
     bvh_storage() = default;
     inline explicit bvh_storage(bvh<Prim> const& b) {
-        if (b.nodes.empty() || b.wide_nodes.empty()) return;
-        root = b.nodes.data();
+        if (b.wide_nodes.empty() || b.root_bounds.empty()) return;
+        root = b.root_bounds.data();
         wide_nodes = b.wide_nodes.data();
         if constexpr (stores_triangle_blocks_v<Prim>)
             leaves = b.blocks.data();
@@ -75,9 +75,9 @@ struct bvh_storage {
     }
 
     inline bool empty() const { return root == nullptr; }
-    inline basic_aabb<value_type> bounds() const { return root == nullptr ? basic_aabb<value_type>{} : root->bounds; }
+    inline basic_aabb<value_type> bounds() const { return root == nullptr ? basic_aabb<value_type>{} : *root; }
 
-    bvh_node<value_type> const* root = nullptr; // the binary root; nullptr for an empty BVH
+    basic_aabb<value_type> const* root = nullptr; // the root's box (bvh::root_bounds); nullptr for an empty BVH
     wide_bvh_node<value_type> const* wide_nodes = nullptr;
     leaf_type const* leaves = nullptr; // the leaves' triangle blocks, or their primitives
 };

@@ -27,7 +27,7 @@ namespace canopy {
 namespace detail {
 
 template <typename S>
-std::uint32_t collapse_node(std::vector<bvh_node<S>> const& nodes, std::uint32_t binary_index,
+std::uint32_t collapse_node(std::span<bvh_node<S> const> nodes, std::uint32_t binary_index,
                             wide_node_array<S>& wide) {
     // Gather the children: start from the binary node's two, open the largest inner one.
     std::uint32_t slots[bvh_width];
@@ -83,9 +83,9 @@ std::uint32_t collapse_node(std::vector<bvh_node<S>> const& nodes, std::uint32_t
 
 } // namespace detail
 
-// The wide layout of a binary tree (empty for an empty tree).
+// The wide layout of a binary tree (empty for an empty tree). Children come after their parents.
 template <typename S>
-wide_node_array<S> collapse_to_wide(std::vector<bvh_node<S>> const& nodes) {
+wide_node_array<S> collapse_to_wide(std::span<bvh_node<S> const> nodes) {
     wide_node_array<S> wide;
     if (nodes.empty()) return wide;
     wide.reserve(nodes.size() / 4 + 1);
@@ -95,7 +95,7 @@ wide_node_array<S> collapse_to_wide(std::vector<bvh_node<S>> const& nodes) {
 
 // Fills the triangle blocks of a triangle BVH straight from the input: leaf by leaf in leaf
 // order, the triangles prims[order[i]] with prim_id = order[i] (`order`: the input index of the
-// primitive at each leaf position), and points the binary and wide leaves at their first block
+// primitive at each leaf position), and points the wide nodes' leaves at their first block
 // (count unchanged). `primitives` stays empty. Leaves are filled in parallel, each into blocks
 // placed beforehand (a prefix sum of the leaves' block counts), so the result does not depend on
 // the threads.
@@ -103,8 +103,7 @@ template <typename Prim>
     requires stores_triangle_blocks_v<Prim>
 void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector<std::uint32_t> const& order) {
     std::vector<std::uint32_t> leaf_starts;
-    for (auto const& n : b.nodes)
-        if (n.is_leaf()) leaf_starts.push_back(n.index);
+    for_each_leaf(b, [&](std::uint32_t child, std::uint32_t, auto const&) { leaf_starts.push_back(child); });
     std::sort(leaf_starts.begin(), leaf_starts.end());
     std::size_t const leaves = leaf_starts.size();
     auto const leaf_end = [&](std::size_t k) { return k + 1 < leaves ? std::size_t(leaf_starts[k + 1]) : order.size(); };
@@ -134,10 +133,6 @@ void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector
     parallel_for_chunks(leaves, 4096, [&](std::size_t first, std::size_t last) {
         for (std::size_t k = first; k < last; ++k) block_at[leaf_starts[k]] = first_block[k];
     });
-    parallel_for_chunks(b.nodes.size(), 4096, [&](std::size_t first, std::size_t last) {
-        for (std::size_t i = first; i < last; ++i)
-            if (b.nodes[i].is_leaf()) b.nodes[i].index = block_at[b.nodes[i].index];
-    });
     parallel_for_chunks(b.wide_nodes.size(), 1024, [&](std::size_t first, std::size_t last) {
         for (std::size_t i = first; i < last; ++i) {
             auto& node = b.wide_nodes[i];
@@ -150,14 +145,17 @@ void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector
 
 namespace detail {
 
-// The last steps of a build, once result.nodes holds the binary tree (leaves indexing `order`,
-// which gives the input index of the primitive at each leaf position; an index may appear more
-// than once, see canopy.bvh:spatial): the wide nodes, size = the input count, and the primitives
-// in leaf order with prim_id = their input index (triangle BVHs: in blocks, pack_triangle_blocks).
+// The last steps of a build, once `nodes` holds the binary tree (nodes[0] its root; leaves
+// indexing `order`, which gives the input index of the primitive at each leaf position; an index
+// may appear more than once, see canopy.bvh:spatial): the wide nodes, the root's box, size = the
+// input count, and the primitives in leaf order with prim_id = their input index (triangle BVHs:
+// in blocks, pack_triangle_blocks). The binary tree is not kept.
 template <typename Prim>
-void finish_build(bvh<Prim>& result, std::span<Prim const> prims, std::vector<std::uint32_t> const& order) {
+void finish_build(bvh<Prim>& result, std::span<bvh_node<bounds_value_t<Prim>> const> nodes, std::span<Prim const> prims,
+                  std::vector<std::uint32_t> const& order) {
     auto clock = std::chrono::steady_clock::now();
-    result.wide_nodes = collapse_to_wide(result.nodes);
+    result.wide_nodes = collapse_to_wide(nodes);
+    result.root_bounds.assign(1, nodes[0].bounds);
     result.build_phases.wide_nodes = lap(clock);
     result.size = prims.size();
     if constexpr (stores_triangle_blocks_v<Prim>) {
