@@ -20,6 +20,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
+#include <stdexcept>
 #include <span>
 #include <string>
 #include <thread>
@@ -114,7 +116,14 @@ int main(int argc, char** argv) {
         else if (a == "--rounds" && i + 1 < argc) rounds = std::max(1, std::atoi(argv[++i]));
         else return usage(argv[0]);
     }
-    auto const scene = make_bench_scene(scene_name, quick);
+    std::optional<canopy::bench::bench_scene> made;
+    try {
+        made = make_bench_scene(scene_name, quick);
+    } catch (std::invalid_argument const& e) { // an unknown scene name
+        std::fprintf(stderr, "%s\n", e.what());
+        return usage(argv[0]);
+    }
+    auto const& scene = *made;
     if (!scene.skipped.empty()) {
         std::fprintf(stderr, "%s: %s\n", scene_name.c_str(), scene.skipped.c_str());
         return 1;

@@ -27,6 +27,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 import canopy.bench_tracing;
@@ -159,7 +161,14 @@ int main(int argc, char** argv) {
         else return usage(argv[0]);
     }
     if (query != "closest" && query != "any") return usage(argv[0]);
-    auto const scene = make_bench_scene(scene_name, quick);
+    std::optional<canopy::bench::bench_scene> made;
+    try {
+        made = make_bench_scene(scene_name, quick);
+    } catch (std::invalid_argument const& e) { // an unknown scene name
+        std::fprintf(stderr, "%s\n", e.what());
+        return usage(argv[0]);
+    }
+    auto const& scene = *made;
     if (!scene.skipped.empty()) {
         std::fprintf(stderr, "%s: %s\n", scene_name.c_str(), scene.skipped.c_str());
         return 1;
