@@ -140,8 +140,8 @@ struct wide_box_ray {
             } else {
                 near_term[k] = simd::float8(ray.near_origin[a]);
                 far_term[k] = simd::float8(ray.far_origin[a]);
-                near_shift[k] = simd::float8(ray.near_shift[a]);
-                far_shift[k] = simd::float8(ray.far_shift[a]);
+                shifts.near[k] = simd::float8(ray.near_shift[a]);
+                shifts.far[k] = simd::float8(ray.far_shift[a]);
             }
             inv_dir[k] = simd::float8(ray.inv_dir[a]);
             bool const negative = ray.inv_dir[a] < 0.0f;
@@ -157,22 +157,24 @@ struct wide_box_ray {
         box_tmax8 = simd::float8(box_tmax);
     }
 
-    // The distance to plane row `row` of every child on axis a, near (or far) side.
-    [[gnu::always_inline]] inline simd::float8 distance(wide_bvh_node<float> const& node, std::size_t row,
-                                                        std::array<simd::float8, 3> const& term,
-                                                        std::array<simd::float8, 3> const& shift,
-                                                        std::size_t a) const {
-        auto const planes = simd::float8::load(node.planes[row].data());
+    // The distance to the near (or far) plane of every child on axis a.
+    template <bool Near>
+    [[gnu::always_inline]] inline simd::float8 distance(wide_bvh_node<float> const& node, std::size_t a) const {
+        auto const planes = simd::float8::load(node.planes[Near ? near_row[a] : far_row[a]].data());
+        auto const& term = Near ? near_term : far_term;
         if constexpr (Fused)
             return simd::fma(planes, inv_dir[a], term[a]); // plane · r − origin · r, one rounding
-        else
-            return ((planes - term[a]) + shift[a]) * inv_dir[a]; // canopy.geometry:box, intersect_slabs
+        else // canopy.geometry:box, intersect_slabs
+            return ((planes - term[a]) + (Near ? shifts.near[a] : shifts.far[a])) * inv_dir[a];
     }
 
     // Fused: minus the offsets; else the near and far origins (prepared_ray::widen_box_tests_for),
-    // and the shifts of the differences (unused in the fused form).
+    // and the shifts of the differences (none in the fused form).
+    struct shift_rows {
+        std::array<simd::float8, 3> near, far;
+    };
     std::array<simd::float8, 3> near_term, far_term, inv_dir;
-    std::array<simd::float8, 3> near_shift, far_shift;
+    [[no_unique_address]] std::conditional_t<Fused, no_lanes, shift_rows> shifts;
     std::array<std::size_t, 3> near_row, far_row;
     simd::float8 tmin, box_tmax8;
     float box_tmax = 0.0f;
@@ -192,13 +194,13 @@ template <bool Fused>
     if constexpr (Fused) {
         // No NaN in this form (canopy.geometry:box, slab_offsets): the first far distance is the
         // minimum so far, with no +inf to start from.
-        tfar = ray.distance(node, ray.far_row[0], ray.far_term, ray.far_shift, 0);
+        tfar = ray.template distance<false>(node, 0);
     } else {
         tfar = float8(std::numeric_limits<float>::infinity());
     }
     for (std::size_t a = 0; a < 3; ++a) {
-        tnear = simd::max(ray.distance(node, ray.near_row[a], ray.near_term, ray.near_shift, a), tnear);
-        if (!Fused || a > 0) tfar = simd::min(ray.distance(node, ray.far_row[a], ray.far_term, ray.far_shift, a), tfar);
+        tnear = simd::max(ray.template distance<true>(node, a), tnear);
+        if (!Fused || a > 0) tfar = simd::min(ray.template distance<false>(node, a), tfar);
     }
     tfar = simd::min(tfar * float8(box_far_scale<float>), ray.box_tmax8);
     child_hits<float> h;
