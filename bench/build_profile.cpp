@@ -3,7 +3,7 @@
 // whether two builds (two binaries, one and two threads) gave the same tree.
 //
 //   canopy_bench_build SCENE [--quick] [--quality automatic|fast|high] [--split-budget F]
-//                      [--split-overlap F] [--split-node-overlap F] [--parallel-threshold N] [--threads T]
+//                      [--split-overlap F] [--split-node-overlap F] [--split-min-gain F] [--parallel-threshold N] [--threads T]
 //                      [--rounds R] [--embree]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers);
 //          the forest builds its tree's mesh
@@ -85,7 +85,7 @@ std::uint64_t fingerprint(canopy::bvh<canopy::triangle> const& b) {
 int usage(char const* program) {
     std::fprintf(stderr,
                  "usage: %s SCENE [--quick] [--quality automatic|fast|high] [--split-budget F] [--threads T] "
-                 "[--rounds R] [--split-overlap F] [--split-node-overlap F] [--parallel-threshold N] [--embree]\n",
+                 "[--rounds R] [--split-overlap F] [--split-node-overlap F] [--split-min-gain F] [--parallel-threshold N] [--embree]\n",
                  program);
     return 2;
 }
@@ -111,6 +111,8 @@ int main(int argc, char** argv) {
             options.parallel_threshold = std::size_t(std::max(1L, std::atol(argv[++i])));
         else if (a == "--split-node-overlap" && i + 1 < argc)
             options.split_node_overlap = float(std::atof(argv[++i]));
+        else if (a == "--split-min-gain" && i + 1 < argc)
+            options.split_min_gain = float(std::atof(argv[++i]));
         else if (a == "--embree") embree = true;
         else if (a == "--threads" && i + 1 < argc) threads = std::size_t(std::max(1, std::atoi(argv[++i])));
         else if (a == "--rounds" && i + 1 < argc) rounds = std::max(1, std::atoi(argv[++i]));

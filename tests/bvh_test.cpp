@@ -600,6 +600,21 @@ TEST_CASE("the same tree on one thread and on two, whatever the parallel thresho
     CHECK(same_tree(chunked, whole));
 }
 
+TEST_CASE("split_min_gain: no spatial split where none could gain enough, the sliver mesh's tree unchanged") {
+    random_source rng(73);
+    auto const slivers = test_support::sliver_mesh();
+    // Gains are fractions of an area, never above 1: nothing is split, every triangle referenced once.
+    canopy::bvh_build_options const never{.quality = canopy::build_quality::high, .split_min_gain = 1.0f};
+    mesh_bvh const unsplit = canopy::build_binned_sah(slivers, never);
+    CHECK(check_split_build(slivers, unsplit, 0.3f, rng) == slivers.size());
+    // The slivers' splits all gain far more than the default's 3 %: the default builds the tree
+    // that the test turned off (0) builds.
+    mesh_bvh const gated = canopy::build_binned_sah(slivers, {.quality = canopy::build_quality::high});
+    mesh_bvh const ungated = canopy::build_binned_sah(slivers, {.quality = canopy::build_quality::high, .split_min_gain = 0.0f});
+    CHECK(canopy::compute_stats(gated).reference_count > slivers.size() + slivers.size() / 20);
+    CHECK(same_tree(gated, ungated));
+}
+
 TEST_CASE("a build's phase times are each non-negative and together within the build's own time") {
     random_source rng(11);
     auto const soup = soup_to_renumber(rng, 20000, 20.0f, 1.0f);

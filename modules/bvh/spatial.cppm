@@ -7,7 +7,10 @@
 // each copy with the box of its triangle's part on that side, unless keeping it whole on one side
 // is cheaper by the SAH (Stich et al.'s reference unsplitting). Spatial splits are tried only
 // where the two sides of the best object split overlap by more than split_overlap of the root's
-// surface area and more than split_node_overlap of the node's (Embree's second test), and add at
+// surface area and more than split_node_overlap of the node's (Embree's second test), and where
+// cutting those sides apart along the split's axis could shrink one of them by more than
+// split_min_gain of its area (trimming_gain: a mesh of small triangles, whose sides overlap only
+// by the width of the triangles on the plane, then skips the spatial binning), and add at
 // most split_budget × n references in all: each node's share of the budget goes to its children
 // in proportion to their references, so the tree does not depend on how threads are scheduled.
 // The references live in one array with room for each subtree's budget (Embree's extended ranges,
@@ -151,6 +154,7 @@ struct spatial_context {
     build_context<S> object; // the references, nodes, node and depth counters, options
     double min_overlap = 0.0;      // split_overlap × the root's surface area
     double node_overlap = 0.0;     // split_node_overlap
+    double min_gain = 0.0;         // split_min_gain
 };
 
 // Per-task working memory: the object bins, the spatial bins of the three axes (boxes, references
@@ -489,6 +493,24 @@ std::size_t partition_spatial(spatial_context<Prim> const& ctx, std::span<prim_r
     return duplicates;
 }
 
+// How much cutting the object split's two sides apart along its axis could shrink them: the
+// larger of the two sides' relative loss of surface area when each is clipped where the other
+// begins. A spatial split along that axis lowers the SAH of the object split by at most that
+// fraction (it clips the same sides and never lowers their counts).
+template <typename S>
+double trimming_gain(basic_aabb<S> const& left, basic_aabb<S> const& right, int axis) {
+    auto const gain = [&](basic_aabb<S> box, bool is_left) {
+        double const area = double(surface_area(box));
+        if (!(area > 0.0)) return 0.0;
+        if (is_left)
+            box.max[axis] = std::max(right.min[axis], box.min[axis]);
+        else
+            box.min[axis] = std::min(left.max[axis], box.max[axis]);
+        return 1.0 - double(surface_area(box)) / area;
+    };
+    return std::max(gain(left, true), gain(right, false));
+}
+
 // Builds the subtree of the `count` references at refs[begin] into nodes[node_index], adding at
 // most `budget` references (the slack after them). Where the budget is spent, the rest of the
 // subtree is canopy.bvh:object's (build_node, the same object splits, in place).
@@ -527,7 +549,8 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
         basic_aabb<S> left, right;
         object_side_bounds(scratch.object, binning, best, left, right);
         double const overlap = double(surface_area(intersection(left, right)));
-        if (overlap > ctx.min_overlap && overlap > ctx.node_overlap * double(surface_area(range.bounds)))
+        if (overlap > ctx.min_overlap && overlap > ctx.node_overlap * double(surface_area(range.bounds)) &&
+            (ctx.min_gain <= 0.0 || trimming_gain(left, right, best.axis) > ctx.min_gain))
             spatial = find_spatial_split(ctx, scratch, refs, range.bounds, opt.bins);
     }
     // A split that would duplicate more references than the budget allows keeps the rest whole
@@ -591,7 +614,8 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
     }
 }
 
-// A fraction among the `high` options (split_budget, split_overlap, split_node_overlap): a
+// A fraction among the `high` options (split_budget, split_overlap, split_node_overlap,
+// split_min_gain): a
 // negative, NaN or infinite value counts as 0.
 inline double fraction_option(float f) { return std::isfinite(f) ? std::max(0.0, double(f)) : 0.0; }
 
@@ -628,6 +652,7 @@ bvh<Prim> build_spatial_splits(std::span<Prim const> prims, bvh_build_options co
     result.build_phases.references = lap(clock);
     ctx.min_overlap = fraction_option(options.split_overlap) * double(surface_area(root));
     ctx.node_overlap = fraction_option(options.split_node_overlap);
+    ctx.min_gain = fraction_option(options.split_min_gain);
     build_buffer<bvh_node<S>> nodes;
     nodes.resize(2 * (n + budget) - 1); // not zeroed: only the nodes made are written, and copied
     ctx.object.nodes = &nodes;

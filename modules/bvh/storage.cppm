@@ -195,6 +195,10 @@ struct bvh_build_options {
     // high: and where that overlap is also more than this fraction of the node's own surface area
     // (Embree's second test and value; 0: the first test alone).
     float split_node_overlap = 0.1f;
+    // high: and where clipping those two sides apart along the split's axis could shrink one of
+    // them by more than this fraction of its surface area (a bound on what a spatial split along
+    // that axis could gain; 0: no such test).
+    float split_min_gain = 0.03f;
 };
 
 // A BVH's statistics, over the wide tree that traversal walks.
