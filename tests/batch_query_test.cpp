@@ -292,11 +292,10 @@ TEST_CASE("batch any_hit gives a triangle hook the candidates of the single rays
         CHECK(stats.packets > 50);
         CHECK(batch.candidates == single.candidates);
         CHECK(single.candidates > 50);
-        // Calls are per packet, shared by its lanes: with leaves of 8-triangle blocks, fewer than one
-        // per ray and triangle. With blocks of 4 (SSE4.2) leaves are smaller and a packet visits the
-        // union of its lanes' leaves, which here takes more calls (2148 against 1999): the calls are
-        // then not compared, while the candidates above are equal on every ISA.
-        if constexpr (canopy::triangle_block_width == 8) CHECK(batch.calls < single.calls);
+        // Calls are per packet, shared by its lanes. Their number is not compared with the single
+        // rays': a packet visits the union of its lanes' leaves and goes on through a leaf after
+        // some lanes found their hit, so it may make more calls or fewer depending on the tree's
+        // shape (blocks of 4 or 8, the collapse to wide nodes). The candidates above are equal.
     };
     check(&s.mesh, &s.mesh + 1, s.mesh.bounds());
     check(&s.nested.top, &s.nested.top + 1, s.nested.top.bounds());

@@ -1,9 +1,9 @@
 // canopy.bvh:wide — collapses a binary BVH into the 8-wide layout that traversal walks.
 //
-// Each wide node takes the children of a binary node and keeps opening the inner child with the
-// largest surface area until it holds bvh_width children or only leaves (the greedy collapse of
-// Wald et al. 2008 / Embree). Leaves are kept as they are: every primitive stays in exactly one
-// leaf. The wide tree is never deeper than the binary one. Triangle BVHs then get their leaves
+// Each wide node takes a cut of a binary node's subtree, at most bvh_width slots, chosen so that the
+// wide tree's node cost (Σ area of its wide nodes) is least (optimal_collapse). Leaves are kept
+// as they are: every primitive stays in exactly one leaf. The wide tree is never deeper than the
+// binary one. Triangle BVHs then get their leaves
 // packed into triangle blocks (pack_triangle_blocks).
 module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
@@ -12,6 +12,7 @@ module;
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <array>
 #include <limits>
 #include <span>
 #include <vector>
@@ -26,60 +27,105 @@ namespace canopy {
 
 namespace detail {
 
+// The collapse that minimises the wide tree's node cost, Σ over wide nodes of their surface area
+// (Ylitie, Karras and Laine 2017, "Efficient incoherent ray traversal on GPUs through compressed
+// wide BVHs", section 3.1, with the binary tree's leaves kept as they are). Bottom-up over the
+// binary nodes (children are stored after their parents, so a reverse sweep sees them first):
+//   F(n, k)  the least cost of covering n's subtree with at most k slots: 0 for a leaf; for an
+//            inner node the smaller of W(n) (n one slot, a wide node of its own) and, opening n,
+//            min over i of F(left, i) + F(right, k − i);
+//   W(n)     area(n) + min over i of F(left, i) + F(right, bvh_width − i).
+// Then top-down, each wide node takes the slots its W chose. Against the greedy collapse (open the
+// largest child until the node is full) this gives fewer wide nodes and fewer node visits per ray,
+// which is where a ray's time goes (docs/performance.md). Ties go to the first choice met, so the
+// tree depends only on the binary tree.
 template <typename S>
-std::uint32_t collapse_node(std::span<bvh_node<S> const> nodes, std::uint32_t binary_index,
-                            wide_node_array<S>& wide) {
-    // Gather the children: start from the binary node's two, open the largest inner one.
-    std::uint32_t slots[bvh_width];
-    int n = 0;
-    if (nodes[binary_index].is_leaf()) {
-        slots[n++] = binary_index;
-    } else {
-        slots[n++] = nodes[binary_index].index;
-        slots[n++] = nodes[binary_index].index + 1;
-    }
-    while (n < bvh_width) {
-        int best = -1;
-        double best_area = -1.0;
-        for (int i = 0; i < n; ++i) {
-            auto const& c = nodes[slots[i]];
-            if (c.is_leaf()) continue;
-            double const area = surface_area(c.bounds);
-            if (area > best_area) {
-                best_area = area;
-                best = i;
+struct optimal_collapse {
+    std::span<bvh_node<S> const> nodes;
+    std::vector<std::array<double, bvh_width + 1>> cost;             // F(n, k) for k = 1 … bvh_width
+    std::vector<std::array<std::uint8_t, 2 * (bvh_width + 1)>> pick; // per k: slots (i, j) to the two
+                                                                     // children; (0, 0): n as one slot
+    std::vector<std::uint8_t> open_left; // W(n): the slots its left child gets
+
+    explicit optimal_collapse(std::span<bvh_node<S> const> n) : nodes(n), cost(n.size()), pick(n.size()), open_left(n.size(), 0) {
+        for (std::size_t x = n.size(); x-- > 0;) {
+            auto& f = cost[x];
+            auto& p = pick[x];
+            p.fill(0);
+            if (n[x].is_leaf()) {
+                f.fill(0.0);
+                continue;
+            }
+            std::size_t const l = n[x].index, r = l + 1;
+            double best = std::numeric_limits<double>::infinity();
+            open_left[x] = 1; // stays valid when no cost is finite (NaN or infinite boxes)
+            for (int i = 1; i < bvh_width; ++i) {
+                double const c = cost[l][std::size_t(i)] + cost[r][std::size_t(bvh_width - i)];
+                if (c < best) best = c, open_left[x] = std::uint8_t(i);
+            }
+            // A NaN area (a box of NaN coordinates) counts as infinite, so that every comparison
+            // below is defined; the choices then keep their valid defaults.
+            double const area = double(surface_area(n[x].bounds));
+            double const w = (area == area ? area : std::numeric_limits<double>::infinity()) + best;
+            f[0] = std::numeric_limits<double>::infinity();
+            f[1] = w;
+            for (int k = 2; k <= bvh_width; ++k) {
+                auto const kk = std::size_t(k);
+                f[kk] = f[kk - 1];
+                p[2 * kk] = p[2 * kk - 2], p[2 * kk + 1] = p[2 * kk - 1];
+                for (int i = 1; i < k; ++i) {
+                    double const c = cost[l][std::size_t(i)] + cost[r][std::size_t(k - i)];
+                    if (c < f[kk]) f[kk] = c, p[2 * kk] = std::uint8_t(i), p[2 * kk + 1] = std::uint8_t(k - i);
+                }
             }
         }
-        if (best < 0) break;
-        std::uint32_t const opened = slots[best];
-        slots[best] = nodes[opened].index;
-        slots[n++] = nodes[opened].index + 1;
     }
-
-    auto const index = std::uint32_t(wide.size());
-    wide.emplace_back();
-    {
-        auto& w = wide.back();
-        S const inf = std::numeric_limits<S>::infinity();
-        for (std::size_t a = 0; a < 3; ++a) w.planes[a].fill(inf), w.planes[3 + a].fill(-inf);
-        w.child.fill(invalid_id);
-        w.count.fill(0);
-    }
-    for (int i = 0; i < n; ++i) {
-        auto const& c = nodes[slots[i]];
-        auto const k = std::size_t(i);
-        std::uint32_t child = c.index;
-        if (!c.is_leaf()) child = collapse_node(nodes, slots[i], wide);
-        auto& w = wide[index]; // collapse_node may have reallocated
-        for (int a = 0; a < 3; ++a) {
-            w.planes[std::size_t(a)][k] = c.bounds.min[a];
-            w.planes[std::size_t(3 + a)][k] = c.bounds.max[a];
+    // The slots that cover x's subtree with at most k of them, appended to slots[count…].
+    void gather(std::uint32_t x, int k, std::uint32_t* slots, int& count) const {
+        auto const& p = pick[x];
+        int const i = p[2 * std::size_t(k)], j = p[2 * std::size_t(k) + 1];
+        if (nodes[x].is_leaf() || (i == 0 && j == 0)) {
+            slots[count++] = x;
+            return;
         }
-        w.child[k] = child;
-        w.count[k] = c.count;
+        gather(nodes[x].index, i, slots, count);
+        gather(nodes[x].index + 1, j, slots, count);
     }
-    return index;
-}
+    // Appends the wide node of binary node x, then its wide children depth first; returns its index.
+    std::uint32_t emit(std::uint32_t x, wide_node_array<S>& wide) const {
+        std::uint32_t slots[bvh_width];
+        int n = 0;
+        if (nodes[x].is_leaf()) {
+            slots[n++] = x;
+        } else {
+            gather(nodes[x].index, open_left[x], slots, n);
+            gather(nodes[x].index + 1, bvh_width - open_left[x], slots, n);
+        }
+        auto const index = std::uint32_t(wide.size());
+        wide.emplace_back();
+        {
+            auto& w = wide.back();
+            S const inf = std::numeric_limits<S>::infinity();
+            for (std::size_t a = 0; a < 3; ++a) w.planes[a].fill(inf), w.planes[3 + a].fill(-inf);
+            w.child.fill(invalid_id);
+            w.count.fill(0);
+        }
+        for (int i = 0; i < n; ++i) {
+            auto const& c = nodes[slots[i]];
+            auto const k = std::size_t(i);
+            std::uint32_t child = c.index;
+            if (!c.is_leaf()) child = emit(slots[i], wide);
+            auto& w = wide[index]; // emit may have reallocated
+            for (int a = 0; a < 3; ++a) {
+                w.planes[std::size_t(a)][k] = c.bounds.min[a];
+                w.planes[std::size_t(3 + a)][k] = c.bounds.max[a];
+            }
+            w.child[k] = child;
+            w.count[k] = c.count;
+        }
+        return index;
+    }
+};
 
 } // namespace detail
 
@@ -89,7 +135,7 @@ wide_node_array<S> collapse_to_wide(std::span<bvh_node<S> const> nodes) {
     wide_node_array<S> wide;
     if (nodes.empty()) return wide;
     wide.reserve(nodes.size() / 4 + 1);
-    detail::collapse_node(nodes, 0, wide);
+    detail::optimal_collapse<S>(nodes).emit(0, wide);
     return wide;
 }
 
