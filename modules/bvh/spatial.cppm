@@ -615,8 +615,7 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
 }
 
 // A fraction among the `high` options (split_budget, split_overlap, split_node_overlap,
-// split_min_gain): a
-// negative, NaN or infinite value counts as 0.
+// split_min_gain): a negative, NaN or infinite value counts as 0.
 inline double fraction_option(float f) { return std::isfinite(f) ? std::max(0.0, double(f)) : 0.0; }
 
 // The split BVH of prims (options already checked by build_binned_sah; prims not empty).

@@ -3,16 +3,16 @@
 // Each wide node takes a cut of a binary node's subtree, at most bvh_width slots, chosen so that the
 // wide tree's node cost (Σ area of its wide nodes) is least (optimal_collapse). Leaves are kept
 // as they are: every primitive stays in exactly one leaf. The wide tree is never deeper than the
-// binary one. Triangle BVHs then get their leaves
-// packed into triangle blocks (pack_triangle_blocks).
+// binary one. Triangle BVHs then get their leaves packed into triangle blocks
+// (pack_triangle_blocks).
 module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
-#include <array>
 #include <limits>
 #include <span>
 #include <vector>
@@ -57,26 +57,31 @@ struct optimal_collapse {
                 continue;
             }
             std::size_t const l = n[x].index, r = l + 1;
-            double best = std::numeric_limits<double>::infinity();
-            open_left[x] = 1; // stays valid when no cost is finite (NaN or infinite boxes)
-            for (int i = 1; i < bvh_width; ++i) {
-                double const c = cost[l][std::size_t(i)] + cost[r][std::size_t(bvh_width - i)];
-                if (c < best) best = c, open_left[x] = std::uint8_t(i);
+            // Opening x with k slots: the least F(l, i) + F(r, k − i), the first i that reaches it
+            // (1 when no cost is finite: NaN or infinite boxes, a valid choice all the same).
+            std::array<double, bvh_width + 1> opened;
+            std::array<std::uint8_t, bvh_width + 1> opened_left;
+            for (int k = 2; k <= bvh_width; ++k) {
+                auto const kk = std::size_t(k);
+                opened[kk] = std::numeric_limits<double>::infinity();
+                opened_left[kk] = 1;
+                for (int i = 1; i < k; ++i) {
+                    double const c = cost[l][std::size_t(i)] + cost[r][std::size_t(k - i)];
+                    if (c < opened[kk]) opened[kk] = c, opened_left[kk] = std::uint8_t(i);
+                }
             }
+            open_left[x] = opened_left[bvh_width];
             // A NaN area (a box of NaN coordinates) counts as infinite, so that every comparison
-            // below is defined; the choices then keep their valid defaults.
+            // is defined; the choices then keep their valid defaults.
             double const area = double(surface_area(n[x].bounds));
-            double const w = (area == area ? area : std::numeric_limits<double>::infinity()) + best;
-            f[0] = std::numeric_limits<double>::infinity();
-            f[1] = w;
+            f[0] = std::numeric_limits<double>::infinity(); // never asked: every cover has a slot
+            f[1] = (area == area ? area : std::numeric_limits<double>::infinity()) + opened[bvh_width];
             for (int k = 2; k <= bvh_width; ++k) {
                 auto const kk = std::size_t(k);
                 f[kk] = f[kk - 1];
                 p[2 * kk] = p[2 * kk - 2], p[2 * kk + 1] = p[2 * kk - 1];
-                for (int i = 1; i < k; ++i) {
-                    double const c = cost[l][std::size_t(i)] + cost[r][std::size_t(k - i)];
-                    if (c < f[kk]) f[kk] = c, p[2 * kk] = std::uint8_t(i), p[2 * kk + 1] = std::uint8_t(k - i);
-                }
+                if (opened[kk] < f[kk])
+                    f[kk] = opened[kk], p[2 * kk] = opened_left[kk], p[2 * kk + 1] = std::uint8_t(k - opened_left[kk]);
             }
         }
     }
