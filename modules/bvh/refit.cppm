@@ -56,8 +56,8 @@ basic_aabb<S> node_bounds(wide_bvh_node<S> const& w) {
 template <typename S>
 void set_slot_bounds(wide_bvh_node<S>& w, std::size_t slot, basic_aabb<S> const& box) {
     for (std::size_t a = 0; a < 3; ++a) {
-        w.planes[a][slot] = box.min[int(a)];
-        w.planes[3 + a][slot] = box.max[int(a)];
+        w.planes[w.min_row(a)][slot] = box.min[int(a)];
+        w.planes[w.max_row(a)][slot] = box.max[int(a)];
     }
 }
 

@@ -52,9 +52,12 @@ inline constexpr int bvh_width = 8;
 // an empty box (min = +inf, max = -inf), count = 0 and child = invalid_id.
 template <typename S>
 struct alignas(64) wide_bvh_node {
-    // The children's boxes, one row per plane: planes[a] the minima and planes[3 + a] the maxima
-    // along axis a (x, y, z), one column per child.
+    // The children's boxes, one row per plane, one column per child: along axis a (x, y, z)
+    // the minima in row min_row(a) = 2a and the maxima in row max_row(a) = 2a + 1. A ray's near
+    // and far rows on an axis are then one row apart, row ^ 1 (canopy.bvh:traverse).
     std::array<std::array<S, bvh_width>, 6> planes;
+    static constexpr std::size_t min_row(std::size_t a) { return 2 * a; }
+    static constexpr std::size_t max_row(std::size_t a) { return 2 * a + 1; }
     // count == 0: child is the index of a wide node (or invalid_id for an unused slot);
     // count ≥ 1: child is the first of `count` primitives of a leaf.
     std::array<std::uint32_t, bvh_width> child;
@@ -62,7 +65,8 @@ struct alignas(64) wide_bvh_node {
 
     basic_aabb<S> child_bounds(int i) const {
         auto const k = std::size_t(i);
-        return {vec3<S>(planes[0][k], planes[1][k], planes[2][k]), vec3<S>(planes[3][k], planes[4][k], planes[5][k])};
+        return {vec3<S>(planes[min_row(0)][k], planes[min_row(1)][k], planes[min_row(2)][k]),
+                vec3<S>(planes[max_row(0)][k], planes[max_row(1)][k], planes[max_row(2)][k])};
     }
     bool used(int i) const { return child[std::size_t(i)] != invalid_id; }
 };

@@ -119,14 +119,17 @@ struct child_hits {
 
 // The rows of wide_bvh_node::planes that hold axis a's near and far planes for a ray that runs
 // towards negative a (an inverse direction below 0; 1/-0 = -inf counts as negative, as in
-// canopy.geometry:box): rows a (minima) and 3 + a (maxima), swapped for such rays.
-[[gnu::always_inline]] inline std::size_t near_plane_row(std::size_t a, bool negative) { return negative ? 3 + a : a; }
-[[gnu::always_inline]] inline std::size_t far_plane_row(std::size_t a, bool negative) { return negative ? a : 3 + a; }
+// canopy.geometry:box): the minima's row 2a and the maxima's 2a + 1, swapped for such rays. The
+// far row is the near row ^ 1, so a ray keeps only its near rows.
+[[gnu::always_inline]] constexpr std::size_t near_plane_row(std::size_t a, bool negative) {
+    return wide_bvh_node<float>::min_row(a) + std::size_t(negative);
+}
+[[gnu::always_inline]] constexpr std::size_t far_plane_row(std::size_t near_row) { return near_row ^ 1u; }
 
 // The constants of the 8-wide box test for one scalar float ray, computed once per BVH: in every
 // lane the inverse direction and either the fused test's offsets (Fused: canopy.geometry:box,
-// slab_offsets) or the near and far origins, and which plane row is near and which far on each
-// axis (by the sign of the inverse direction, Ize 2013's ordered slabs: no select per node).
+// slab_offsets) or the near and far origins, and the near plane row of each axis (by the sign
+// of the inverse direction, Ize 2013's ordered slabs: no select per node).
 template <bool Fused>
 struct wide_box_ray {
     // Member functions of a class in a named module are not implicitly inline: say so, or
@@ -144,9 +147,7 @@ struct wide_box_ray {
                 shifts.far[k] = simd::float8(ray.far_shift[a]);
             }
             inv_dir[k] = simd::float8(ray.inv_dir[a]);
-            bool const negative = ray.inv_dir[a] < 0.0f;
-            near_row[k] = near_plane_row(k, negative);
-            far_row[k] = far_plane_row(k, negative);
+            near_rows[k] = near_plane_row(k, ray.inv_dir[a] < 0.0f);
         }
         tmin = simd::float8(ray.tmin);
         set_tmax(ray.tmax);
@@ -160,7 +161,8 @@ struct wide_box_ray {
     // The distance to the near (or far) plane of every child on axis a.
     template <bool Near>
     [[gnu::always_inline]] inline simd::float8 distance(wide_bvh_node<float> const& node, std::size_t a) const {
-        auto const planes = simd::float8::load(node.planes[Near ? near_row[a] : far_row[a]].data());
+        std::size_t const row = Near ? near_rows[a] : far_plane_row(near_rows[a]);
+        auto const planes = simd::float8::load(node.planes[row].data());
         auto const& term = Near ? near_term : far_term;
         if constexpr (Fused)
             return simd::fma(planes, inv_dir[a], term[a]); // plane · r − origin · r, one rounding
@@ -175,7 +177,9 @@ struct wide_box_ray {
     };
     std::array<simd::float8, 3> near_term, far_term, inv_dir;
     [[no_unique_address]] std::conditional_t<Fused, no_lanes, shift_rows> shifts;
-    std::array<std::size_t, 3> near_row, far_row;
+    // The near plane row of each axis (the far row is near_rows[a] ^ 1, computed per node: three
+    // registers for the rows instead of six, and no spills in the traversal loop).
+    std::array<std::size_t, 3> near_rows;
     simd::float8 tmin, box_tmax8;
     float box_tmax = 0.0f;
 };
@@ -321,7 +325,7 @@ struct node_tester<T, S, I, true> {
             auto const k = std::size_t(a);
             bool const negative = simd::movemask(r.inv_dir[a] < T(0.0f)) != 0;
             near_row[k] = near_plane_row(k, negative);
-            far_row[k] = far_plane_row(k, negative);
+            far_row[k] = far_plane_row(near_row[k]);
             near_term[k] = -r.slabs.near_offset[a];
             far_term[k] = -r.slabs.far_offset[a];
             // The packet's bounds for the frustum test (all lanes: every one is finite here).
@@ -449,12 +453,20 @@ struct traversal_entry {
 };
 
 // The pending children of one traversal. Depth never exceeds bvh_max_depth, and each level
-// pushes at most bvh_width - 1 entries. The top is a pointer, not an int count: the entries'
-// 32-bit fields may alias an int (signed and unsigned types alias), so a count would be reloaded
-// from memory after every entry stored; a pointer stays in a register.
+// pushes at most bvh_width - 1 entries.
+template <typename S, typename L = no_lanes>
+using traversal_entries = std::array<traversal_entry<S, L>, (bvh_width - 1) * bvh_max_depth + 1>;
+
+// The traversal's view of its entries (traversal_entries, a separate local): the bottom and the
+// top, two pointers that stay in registers. The top is a pointer, not an int count: the
+// entries' 32-bit fields may alias an int, so a count would be reloaded after every entry stored.
+// And the pointers are not members of the array's object: a pointer into an object stored in
+// that same object makes its address escape, and the compiler then keeps the top in memory,
+// reloading and storing it at every push and pop.
 template <typename S, typename L = no_lanes>
 struct traversal_stack {
-    traversal_stack() = default;
+    [[gnu::always_inline]] inline explicit traversal_stack(traversal_entries<S, L>& storage)
+        : bottom(storage.data()), top(storage.data()) {}
     traversal_stack(traversal_stack const&) = delete;
     traversal_stack& operator=(traversal_stack const&) = delete;
 
@@ -463,7 +475,7 @@ struct traversal_stack {
     // Pops into `next` the most recent entry that the ray still enters before box_tmax; false
     // when none is left.
     [[gnu::always_inline]] inline bool pop_nearer_than(S box_tmax, traversal_entry<S, L>& next) {
-        while (top != entries.data()) {
+        while (top != bottom) {
             --top;
             if (top->tnear <= box_tmax) {
                 next = *top;
@@ -473,8 +485,8 @@ struct traversal_stack {
         return false;
     }
 
-    std::array<traversal_entry<S, L>, (bvh_width - 1) * bvh_max_depth + 1> entries;
-    traversal_entry<S, L>* top = entries.data(); // one past the most recent entry
+    traversal_entry<S, L>* bottom;
+    traversal_entry<S, L>* top; // one past the most recent entry
 };
 
 // The hit children of `node` in visiting order: returns the first to visit and pushes the
@@ -588,7 +600,8 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
     using S = typename bvh<Prim>::value_type;
     using L = lanes_t<T>;
     Tester nodes(ray, isect);
-    traversal_stack<S, L> stack;
+    traversal_entries<S, L> pending;
+    traversal_stack<S, L> stack(pending);
     traversal_entry<S, L> current{from.child, from.count, from.tnear, {}};
     if constexpr (!std::is_same_v<L, no_lanes>) current.lanes = (1u << simd::simd_width_v<T>) - 1u;
     // Packets that may trace lanes alone tally their occupancy here, and once per traversal into

@@ -111,7 +111,7 @@ struct optimal_collapse {
         {
             auto& w = wide.back();
             S const inf = std::numeric_limits<S>::infinity();
-            for (std::size_t a = 0; a < 3; ++a) w.planes[a].fill(inf), w.planes[3 + a].fill(-inf);
+            for (std::size_t a = 0; a < 3; ++a) w.planes[w.min_row(a)].fill(inf), w.planes[w.max_row(a)].fill(-inf);
             w.child.fill(invalid_id);
             w.count.fill(0);
         }
@@ -122,8 +122,8 @@ struct optimal_collapse {
             if (!c.is_leaf()) child = emit(slots[i], wide);
             auto& w = wide[index]; // emit may have reallocated
             for (int a = 0; a < 3; ++a) {
-                w.planes[std::size_t(a)][k] = c.bounds.min[a];
-                w.planes[std::size_t(3 + a)][k] = c.bounds.max[a];
+                w.planes[w.min_row(std::size_t(a))][k] = c.bounds.min[a];
+                w.planes[w.max_row(std::size_t(a))][k] = c.bounds.max[a];
             }
             w.child[k] = child;
             w.count[k] = c.count;
