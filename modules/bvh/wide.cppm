@@ -30,7 +30,7 @@ namespace detail {
 // The collapse that minimises the wide tree's node cost, Σ over wide nodes of their surface area
 // (Ylitie, Karras and Laine 2017, "Efficient incoherent ray traversal on GPUs through compressed
 // wide BVHs", section 3.1, with the binary tree's leaves kept as they are). Bottom-up over the
-// binary nodes (children are stored after their parents, so a reverse sweep sees them first):
+// binary nodes (post-order, the subtrees of the top levels in parallel: solve):
 //   F(n, k)  the least cost of covering n's subtree with at most k slots: 0 for a leaf; for an
 //            inner node the smaller of W(n) (n one slot, a wide node of its own) and, opening n,
 //            min over i of F(left, i) + F(right, k − i);
@@ -42,47 +42,66 @@ namespace detail {
 template <typename S>
 struct optimal_collapse {
     std::span<bvh_node<S> const> nodes;
-    std::vector<std::array<double, bvh_width + 1>> cost;             // F(n, k) for k = 1 … bvh_width
-    std::vector<std::array<std::uint8_t, 2 * (bvh_width + 1)>> pick; // per k: slots (i, j) to the two
-                                                                     // children; (0, 0): n as one slot
-    std::vector<std::uint8_t> open_left; // W(n): the slots its left child gets
+    // Written for every node before they are read (solve), so left unzeroed (build_buffer).
+    build_buffer<std::array<double, bvh_width + 1>> cost;             // F(n, k) for k = 1 … bvh_width
+    build_buffer<std::array<std::uint8_t, 2 * (bvh_width + 1)>> pick; // per k: slots (i, j) to the two
+                                                                      // children; (0, 0): n as one slot
+    build_buffer<std::uint8_t> open_left; // W(n): the slots its left child gets
 
-    explicit optimal_collapse(std::span<bvh_node<S> const> n) : nodes(n), cost(n.size()), pick(n.size()), open_left(n.size(), 0) {
-        for (std::size_t x = n.size(); x-- > 0;) {
-            auto& f = cost[x];
-            auto& p = pick[x];
-            p.fill(0);
-            if (n[x].is_leaf()) {
-                f.fill(0.0);
-                continue;
+    explicit optimal_collapse(std::span<bvh_node<S> const> n) : nodes(n) {
+        cost.resize(n.size());
+        pick.resize(n.size());
+        open_left.resize(n.size());
+        if (!n.empty()) solve(0, 0);
+    }
+
+    // The subtrees of the top levels are solved in parallel (the binary tree's node indices follow
+    // no order that would split the work into ranges: parallel builds allocate them as they go).
+    static constexpr int parallel_levels = 6;
+
+    // F and W of x's subtree, children before their parent (post-order). Each node's values
+    // depend only on its children's: the result does not depend on the threads.
+    void solve(std::uint32_t x, int level) {
+        auto const& node = nodes[x];
+        if (node.is_leaf()) {
+            cost[x].fill(0.0);
+            pick[x].fill(0);
+            open_left[x] = 0;
+            return;
+        }
+        std::uint32_t const l = node.index, r = l + 1;
+        if (level < parallel_levels)
+            parallel_invoke([&] { solve(l, level + 1); }, [&] { solve(r, level + 1); });
+        else
+            solve(l, level + 1), solve(r, level + 1);
+        auto& f = cost[x];
+        auto& p = pick[x];
+        p.fill(0);
+        // Opening x with k slots: the least F(l, i) + F(r, k − i), the first i that reaches it
+        // (1 when no cost is finite: NaN or infinite boxes, a valid choice all the same).
+        std::array<double, bvh_width + 1> opened;
+        std::array<std::uint8_t, bvh_width + 1> opened_left;
+        for (int k = 2; k <= bvh_width; ++k) {
+            auto const kk = std::size_t(k);
+            opened[kk] = std::numeric_limits<double>::infinity();
+            opened_left[kk] = 1;
+            for (int i = 1; i < k; ++i) {
+                double const c = cost[l][std::size_t(i)] + cost[r][std::size_t(k - i)];
+                if (c < opened[kk]) opened[kk] = c, opened_left[kk] = std::uint8_t(i);
             }
-            std::size_t const l = n[x].index, r = l + 1;
-            // Opening x with k slots: the least F(l, i) + F(r, k − i), the first i that reaches it
-            // (1 when no cost is finite: NaN or infinite boxes, a valid choice all the same).
-            std::array<double, bvh_width + 1> opened;
-            std::array<std::uint8_t, bvh_width + 1> opened_left;
-            for (int k = 2; k <= bvh_width; ++k) {
-                auto const kk = std::size_t(k);
-                opened[kk] = std::numeric_limits<double>::infinity();
-                opened_left[kk] = 1;
-                for (int i = 1; i < k; ++i) {
-                    double const c = cost[l][std::size_t(i)] + cost[r][std::size_t(k - i)];
-                    if (c < opened[kk]) opened[kk] = c, opened_left[kk] = std::uint8_t(i);
-                }
-            }
-            open_left[x] = opened_left[bvh_width];
-            // A NaN area (a box of NaN coordinates) counts as infinite, so that every comparison
-            // is defined; the choices then keep their valid defaults.
-            double const area = double(surface_area(n[x].bounds));
-            f[0] = std::numeric_limits<double>::infinity(); // never asked: every cover has a slot
-            f[1] = (area == area ? area : std::numeric_limits<double>::infinity()) + opened[bvh_width];
-            for (int k = 2; k <= bvh_width; ++k) {
-                auto const kk = std::size_t(k);
-                f[kk] = f[kk - 1];
-                p[2 * kk] = p[2 * kk - 2], p[2 * kk + 1] = p[2 * kk - 1];
-                if (opened[kk] < f[kk])
-                    f[kk] = opened[kk], p[2 * kk] = opened_left[kk], p[2 * kk + 1] = std::uint8_t(k - opened_left[kk]);
-            }
+        }
+        open_left[x] = opened_left[bvh_width];
+        // A NaN area (a box of NaN coordinates) counts as infinite, so that every comparison
+        // is defined; the choices then keep their valid defaults.
+        double const area = double(surface_area(node.bounds));
+        f[0] = std::numeric_limits<double>::infinity(); // never asked: every cover has a slot
+        f[1] = (area == area ? area : std::numeric_limits<double>::infinity()) + opened[bvh_width];
+        for (int k = 2; k <= bvh_width; ++k) {
+            auto const kk = std::size_t(k);
+            f[kk] = f[kk - 1];
+            p[2 * kk] = p[2 * kk - 2], p[2 * kk + 1] = p[2 * kk - 1];
+            if (opened[kk] < f[kk])
+                f[kk] = opened[kk], p[2 * kk] = opened_left[kk], p[2 * kk + 1] = std::uint8_t(k - opened_left[kk]);
         }
     }
     // The slots that cover x's subtree with at most k of them, appended to slots[count…].
