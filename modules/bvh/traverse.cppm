@@ -177,8 +177,9 @@ struct wide_box_ray {
     };
     std::array<simd::float8, 3> near_term, far_term, inv_dir;
     [[no_unique_address]] std::conditional_t<Fused, no_lanes, shift_rows> shifts;
-    // The near plane row of each axis (the far row is near_rows[a] ^ 1, computed per node: three
-    // registers for the rows instead of six, and no spills in the traversal loop).
+    // The near plane row of each axis; the far row is far_plane_row of it (the compiler may keep
+    // both per ray: loads of spilled row offsets are off the loop's critical path, measured in
+    // docs/performance.md, Run 11).
     std::array<std::size_t, 3> near_rows;
     simd::float8 tmin, box_tmax8;
     float box_tmax = 0.0f;
@@ -325,7 +326,6 @@ struct node_tester<T, S, I, true> {
             auto const k = std::size_t(a);
             bool const negative = simd::movemask(r.inv_dir[a] < T(0.0f)) != 0;
             near_row[k] = near_plane_row(k, negative);
-            far_row[k] = far_plane_row(near_row[k]);
             near_term[k] = -r.slabs.near_offset[a];
             far_term[k] = -r.slabs.far_offset[a];
             // The packet's bounds for the frustum test (all lanes: every one is finite here).
@@ -350,7 +350,7 @@ struct node_tester<T, S, I, true> {
         float8 lo, hi;
         for (std::size_t a = 0; a < 3; ++a) {
             auto const pn = float8::load(node.planes[near_row[a]].data());
-            auto const pf = float8::load(node.planes[far_row[a]].data());
+            auto const pf = float8::load(node.planes[far_plane_row(near_row[a])].data());
             float8 const n = simd::min(simd::fma(pn, inv_dir_lo[a], near_term_lo[a]), simd::fma(pn, inv_dir_hi[a], near_term_lo[a]));
             float8 const f = simd::max(simd::fma(pf, inv_dir_lo[a], far_term_hi[a]), simd::fma(pf, inv_dir_hi[a], far_term_hi[a]));
             lo = a == 0 ? n : simd::max(n, lo);
@@ -380,7 +380,7 @@ struct node_tester<T, S, I, true> {
             T tfar;
             for (std::size_t a = 0; a < 3; ++a) {
                 tnear = simd::max(simd::fma(T(node.planes[near_row[a]][c]), ray.inv_dir[int(a)], near_term[a]), tnear);
-                T const far = simd::fma(T(node.planes[far_row[a]][c]), ray.inv_dir[int(a)], far_term[a]);
+                T const far = simd::fma(T(node.planes[far_plane_row(near_row[a])][c]), ray.inv_dir[int(a)], far_term[a]);
                 tfar = a == 0 ? far : simd::min(far, tfar);
             }
             tfar = simd::min(tfar * T(box_far_scale<float>), box_tmax_lanes);
@@ -407,7 +407,7 @@ struct node_tester<T, S, I, true> {
 
     prepared_ray<T> const& ray;
     std::array<T, 3> near_term, far_term; // minus the fused offsets
-    std::array<std::size_t, 3> near_row, far_row;
+    std::array<std::size_t, 3> near_row; // the far row is far_plane_row(near_row[a])
     T box_tmax_lanes;
     // The frustum (frustum_candidates): per axis the extremes of the lanes' inverse directions,
     // the smallest near term and the largest far term; the widest box tmax.
