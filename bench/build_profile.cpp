@@ -3,7 +3,7 @@
 // whether two builds (two binaries, one and two threads) gave the same tree.
 //
 //   canopy_bench_build SCENE [--quick] [--quality automatic|fast|high] [--split-budget F]
-//                      [--split-overlap F] [--split-node-overlap F] [--split-min-gain F] [--parallel-threshold N] [--threads T]
+//                      [--split-overlap F] [--split-node-overlap F] [--split-min-gain F] [--split-min-references N] [--parallel-threshold N] [--threads T]
 //                      [--rounds R] [--embree]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers);
 //          the forest builds its tree's mesh
@@ -15,6 +15,7 @@
 // Builds R times (default 1) with T worker threads (default: all cores) and prints the tree's
 // triangles, references, nodes, depth, SAH cost, a 64-bit fingerprint of its structure (fingerprint),
 // and the build time of each round (wall clock: meaningless on a busy machine).
+#include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -85,7 +86,7 @@ std::uint64_t fingerprint(canopy::bvh<canopy::triangle> const& b) {
 int usage(char const* program) {
     std::fprintf(stderr,
                  "usage: %s SCENE [--quick] [--quality automatic|fast|high] [--split-budget F] [--threads T] "
-                 "[--rounds R] [--split-overlap F] [--split-node-overlap F] [--split-min-gain F] [--parallel-threshold N] [--embree]\n",
+                 "[--rounds R] [--split-overlap F] [--split-node-overlap F] [--split-min-gain F] [--split-min-references N] [--parallel-threshold N] [--embree]\n",
                  program);
     return 2;
 }
@@ -113,6 +114,8 @@ int main(int argc, char** argv) {
             options.split_node_overlap = float(std::atof(argv[++i]));
         else if (a == "--split-min-gain" && i + 1 < argc)
             options.split_min_gain = float(std::atof(argv[++i]));
+        else if (a == "--split-min-references" && i + 1 < argc)
+            options.split_min_references = std::uint32_t(std::clamp(std::atol(argv[++i]), 0L, long(UINT32_MAX)));
         else if (a == "--embree") embree = true;
         else if (a == "--threads" && i + 1 < argc) threads = std::size_t(std::max(1, std::atoi(argv[++i])));
         else if (a == "--rounds" && i + 1 < argc) rounds = std::max(1, std::atoi(argv[++i]));

@@ -516,11 +516,13 @@ TEST_CASE("build_quality::high references every triangle whole, by input index, 
     std::vector<std::pair<char const*, std::vector<triangle>>> const inputs{{"slivers", test_support::sliver_mesh()},
                                                                            {"needles", needles}};
     for (auto const& [name, input] : inputs) {
-        for (canopy::bvh_build_options const options :
+        for (canopy::bvh_build_options const& options :
              {canopy::bvh_build_options{.quality = canopy::build_quality::high},
               canopy::bvh_build_options{.max_leaf_size = 1, .bins = 8, .quality = canopy::build_quality::high},
-              canopy::bvh_build_options{.quality = canopy::build_quality::high, .split_budget = 2.0f}}) {
-            INFO(name << ", max_leaf_size " << options.max_leaf_size << ", split budget " << options.split_budget);
+              canopy::bvh_build_options{.quality = canopy::build_quality::high, .split_budget = 2.0f},
+              canopy::bvh_build_options{.quality = canopy::build_quality::high, .split_min_references = 1}}) {
+            INFO(name << ", max_leaf_size " << options.max_leaf_size << ", split budget " << options.split_budget
+                      << ", split_min_references " << options.split_min_references);
             mesh_bvh const high = canopy::build_binned_sah(input, options);
             std::size_t const references = check_split_build(input, high, options.split_budget, rng);
             CHECK(references > input.size() + input.size() / 20); // spatial splits did happen
@@ -613,6 +615,15 @@ TEST_CASE("split_min_gain: no spatial split where none could gain enough, the sl
     mesh_bvh const ungated = canopy::build_binned_sah(slivers, {.quality = canopy::build_quality::high, .split_min_gain = 0.0f});
     CHECK(canopy::compute_stats(gated).reference_count > slivers.size() + slivers.size() / 20);
     CHECK(same_tree(gated, ungated));
+}
+
+TEST_CASE("split_min_references: no spatial split in nodes with fewer references") {
+    random_source rng(79);
+    auto const slivers = test_support::sliver_mesh();
+    // A threshold above the triangle count: no node may split, every triangle is referenced once.
+    mesh_bvh const unsplit = canopy::build_binned_sah(
+        slivers, {.quality = canopy::build_quality::high, .split_min_references = std::uint32_t(slivers.size() + 1)});
+    CHECK(check_split_build(slivers, unsplit, 0.3f, rng) == slivers.size());
 }
 
 TEST_CASE("a build's phase times are each non-negative and together within the build's own time") {

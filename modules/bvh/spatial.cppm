@@ -10,7 +10,8 @@
 // surface area and more than split_node_overlap of the node's (Embree's second test), and where
 // cutting those sides apart along the split's axis could shrink one of them by more than
 // split_min_gain of its area (trimming_gain: a mesh of small triangles, whose sides overlap only
-// by the width of the triangles on the plane, then skips the spatial binning), and add at
+// by the width of the triangles on the plane, then skips the spatial binning), in nodes of at
+// least split_min_references references, and add at
 // most split_budget × n references in all: each node's share of the budget goes to its children
 // in proportion to their references, so the tree does not depend on how threads are scheduled.
 // The references live in one array with room for each subtree's budget (Embree's extended ranges,
@@ -545,7 +546,7 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
     split_choice best = object_best;
 
     spatial_choice<S> spatial;
-    if (finite && best.axis >= 0) {
+    if (finite && best.axis >= 0 && count >= opt.split_min_references) {
         basic_aabb<S> left, right;
         object_side_bounds(scratch.object, binning, best, left, right);
         double const overlap = double(surface_area(intersection(left, right)));

@@ -203,6 +203,10 @@ struct bvh_build_options {
     // them by more than this fraction of its surface area (a bound on what a spatial split along
     // that axis could gain; 0: no such test).
     float split_min_gain = 0.03f;
+    // high: spatial splits are tried only in nodes of at least this many references (0 or 1: in
+    // every node). Below, a split gains little SAH, and binning the references' clipped parts
+    // costs the most per reference (each crosses many bins of a small node).
+    std::uint32_t split_min_references = 16;
 };
 
 // A BVH's statistics, over the wide tree that traversal walks.
