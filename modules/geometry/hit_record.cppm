@@ -9,6 +9,7 @@ module;
 #include <canopy/check.hpp>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <type_traits>
 export module canopy.geometry:hit_record;
@@ -123,6 +124,38 @@ basic_hit_record<simd::scalar_type_t<T>> record_lane(basic_hit_record<T> const& 
     r.inst_id = std::uint32_t(p.inst_id[k]);
     for (std::size_t d = 0; d < r.inner_inst_id.size(); ++d) r.inner_inst_id[d] = std::uint32_t(p.inner_inst_id[d][k]);
     return r;
+}
+
+// The records of an 8-lane packet's lanes written to out[0, 8), each what record_lane(p, k) gives
+// (how the batch queries return a packet's results): the eight 32-bit members that lead a scalar
+// record (hit as 0 or 1, t, prim_id, geom_id, inst_id, inner_inst_id) by one 8 × 8 transposition
+// and one 32-byte copy per record, then u and v lane by lane (record_lane, once per lane, extracts
+// all ten members one at a time: 160 instructions a packet). Kept beside record_lane: a member
+// added to the record must be added to both (the static_assert below pins the layout).
+[[gnu::always_inline]] inline void write_lane_records(basic_hit_record<simd::float8> const& p, basic_hit_record<float>* out) {
+    using R = basic_hit_record<float>;
+    static_assert(std::is_trivially_copyable_v<R> && std::is_standard_layout_v<R> && sizeof(bool) == 1 &&
+                      offsetof(R, hit) == 0 && offsetof(R, t) == 4 && offsetof(R, prim_id) == 8 &&
+                      offsetof(R, geom_id) == 12 && offsetof(R, inst_id) == 16 && offsetof(R, inner_inst_id) == 20 &&
+                      sizeof(R::inner_inst_id) == 12 && offsetof(R, u) == 32 && offsetof(R, v) == 36,
+                  "write_lane_records: a scalar record leads with eight 32-bit members");
+    std::array<simd::float8, 8> rows{
+        simd::as_float(simd::select(p.hit, simd::int8(1), simd::int8(0))),
+        p.t,
+        simd::as_float(p.prim_id),
+        simd::as_float(p.geom_id),
+        simd::as_float(p.inst_id),
+        simd::as_float(p.inner_inst_id[0]),
+        simd::as_float(p.inner_inst_id[1]),
+        simd::as_float(p.inner_inst_id[2])};
+    simd::transpose(rows);
+    for (std::size_t k = 0; k < 8; ++k) {
+        std::array<float, 8> lead;
+        rows[k].store(lead.data());
+        std::memcpy(static_cast<void*>(out + k), lead.data(), sizeof(lead));
+        out[k].u = p.u[int(k)];
+        out[k].v = p.v[int(k)];
+    }
 }
 
 template <typename T>

@@ -74,7 +74,6 @@ module;
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <cstring>
 #include <iterator>
 #include <limits>
 #include <span>
@@ -233,36 +232,6 @@ inline bool coherent_group(batch_packet const& p, float spread_limit) {
     return true;
 }
 
-// The records of a packet's 8 lanes written to out[0, 8), each what record_lane(p, k) gives:
-// the eight 32-bit members that lead a scalar record (hit as 0 or 1, t, prim_id, geom_id, inst_id,
-// inner_inst_id) by one 8 × 8 transposition and one 32-byte copy per record, then u and v lane by
-// lane (record_lane extracts all ten members one lane at a time: 160 instructions a packet).
-inline void write_lane_records(basic_hit_record<simd::float8> const& p, basic_hit_record<float>* out) {
-    using R = basic_hit_record<float>;
-    static_assert(std::is_trivially_copyable_v<R> && std::is_standard_layout_v<R> && sizeof(bool) == 1 &&
-                      offsetof(R, hit) == 0 && offsetof(R, t) == 4 && offsetof(R, prim_id) == 8 &&
-                      offsetof(R, geom_id) == 12 && offsetof(R, inst_id) == 16 && offsetof(R, inner_inst_id) == 20 &&
-                      sizeof(R::inner_inst_id) == 12 && offsetof(R, u) == 32 && offsetof(R, v) == 36,
-                  "write_lane_records: a scalar record leads with eight 32-bit members");
-    std::array<simd::float8, batch_width> rows{
-        simd::as_float(simd::select(p.hit, simd::int8(1), simd::int8(0))),
-        p.t,
-        simd::as_float(p.prim_id),
-        simd::as_float(p.geom_id),
-        simd::as_float(p.inst_id),
-        simd::as_float(p.inner_inst_id[0]),
-        simd::as_float(p.inner_inst_id[1]),
-        simd::as_float(p.inner_inst_id[2])};
-    simd::transpose(rows);
-    for (std::size_t k = 0; k < batch_width; ++k) {
-        std::array<float, batch_width> lead;
-        rows[k].store(lead.data());
-        std::memcpy(static_cast<void*>(out + k), lead.data(), sizeof(lead));
-        out[k].u = p.u[int(k)];
-        out[k].v = p.v[int(k)];
-    }
-}
-
 inline void check_batch_sizes(std::size_t rays, std::size_t results) {
     if (results < rays) throw std::invalid_argument("canopy: a batch query needs one result per ray");
 }
@@ -351,7 +320,7 @@ batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<
         rays, first, last, packing,
         [&](std::size_t i, auto const& p) {
             auto const hr = closest_hit(p, first, last, isect);
-            detail::write_lane_records(hr, out.data() + i);
+            write_lane_records(hr, out.data() + i);
         },
         [&](std::size_t i) { out[i] = detail::query_one_ray<true>(rays[i], first, last, isect); });
 }
@@ -365,7 +334,7 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basi
         rays, first, last, packing,
         [&](std::size_t i, auto const& p) {
             auto const hr = any_hit(p, first, last, isect);
-            detail::write_lane_records(hr, out.data() + i);
+            write_lane_records(hr, out.data() + i);
         },
         [&](std::size_t i) { out[i] = detail::query_one_ray<false>(rays[i], first, last, isect); });
 }
