@@ -137,8 +137,8 @@ basic_hit_record<simd::scalar_type_t<T>> record_lane(basic_hit_record<T> const& 
     static_assert(std::is_trivially_copyable_v<R> && std::is_standard_layout_v<R> && sizeof(bool) == 1 &&
                       offsetof(R, hit) == 0 && offsetof(R, t) == 4 && offsetof(R, prim_id) == 8 &&
                       offsetof(R, geom_id) == 12 && offsetof(R, inst_id) == 16 && offsetof(R, inner_inst_id) == 20 &&
-                      sizeof(R::inner_inst_id) == 12 && offsetof(R, u) == 32 && offsetof(R, v) == 36,
-                  "write_lane_records: a scalar record leads with eight 32-bit members");
+                      sizeof(R::inner_inst_id) == 12 && offsetof(R, u) == 32 && offsetof(R, v) == 36 && sizeof(R) == 40,
+                  "write_lane_records: a scalar record is eight leading 32-bit members, then u and v");
     std::array<simd::float8, 8> rows{
         simd::as_float(simd::select(p.hit, simd::int8(1), simd::int8(0))),
         p.t,
