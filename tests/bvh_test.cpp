@@ -906,3 +906,76 @@ TEST_CASE("SAH drift after refits: counted against a fresh build, and the rebuil
     CHECK(canopy::sah_drift(small, built) > 1.0);
     CHECK_FALSE(canopy::needs_rebuild(small, built));
 }
+
+// The spatial splits' binning clips a reference that spans several bins into one part per bin
+// (canopy.bvh:spatial): the 4-lane sweep, with its own path for two bins, must give the boxes of
+// the scalar clipping, bin by bin. Random triangles, needles among them, references clipped to
+// random boxes as split references are, and vertices on dyadic grids, so that vertices fall
+// exactly on the planes.
+TEST_CASE("spatial binning: the vector sweep gives the scalar clipping's part boxes, with two bins or more") {
+    if constexpr (!canopy::simd::native_width<4>) {
+        SUCCEED("no 4-lane vectors in this build: the builder bins with the scalar clipping only");
+    } else {
+        using canopy::aabb;
+        constexpr int bins = 16;
+        random_source rng(2026);
+        int two_bins = 0, more_bins = 0;
+        for (int iteration = 0; iteration < 40000; ++iteration) {
+            bool const on_grid = iteration % 3 == 0;
+            auto const point = [&] { return on_grid ? rng.dyadic_point(-2.0f, 2.0f, 3) : rng.point(-2.0f, 2.0f); };
+            triangle tri{point(), point(), point(), 0, 0};
+            if (iteration % 5 == 1) { // a needle: two vertices close together, the third far away
+                tri.v1 = tri.v0 + rng.point(-1e-3f, 1e-3f);
+            } else if (iteration % 5 == 2) { // about a bin wide: most span two bins
+                tri.v1 = tri.v0 + rng.point(-0.3f, 0.3f);
+                tri.v2 = tri.v0 + rng.point(-0.3f, 0.3f);
+            }
+            aabb const tri_box = canopy::get_bounds(tri);
+            aabb ref = tri_box;
+            if (iteration % 2 == 0) { // a reference clipped by earlier splits
+                aabb const cut{rng.point(-2.0f, 0.5f), rng.point(-0.5f, 2.0f)};
+                ref = canopy::intersection(tri_box, cut);
+                if (canopy::is_empty(ref)) continue;
+            }
+            // The node: the grid's box (planes at multiples of 1/4), or the reference's box grown.
+            aabb const node = on_grid ? aabb{vec3<float>(-2.0f), vec3<float>(2.0f)}
+                                      : aabb{ref.min - rng.point(0.0f, 1.0f), ref.max + rng.point(0.0f, 1.0f)};
+            int const axis = rng.integer(0, 2);
+            float const lo = node.min[axis], hi = node.max[axis];
+            if (!(hi > lo)) continue;
+            std::array<float, bins + 1> planes{}; // as find_spatial_split places them
+            for (int k = 0; k < bins; ++k)
+                planes[std::size_t(k)] = float(double(lo) + (double(hi) - double(lo)) * double(k) / double(bins));
+            planes[bins] = hi;
+            float const scale = float(bins) / (hi - lo);
+            int const first = canopy::detail::plane_bin(ref.min[axis], planes.data(), bins, scale);
+            int const last = canopy::detail::last_plane_bin(ref.max[axis], first, planes.data(), bins, scale);
+            if (first == last) continue;
+            (last == first + 1 ? two_bins : more_bins) += 1;
+
+            std::array<aabb, bins> scalar_boxes{}, parts{};
+            canopy::detail::bin_reference_parts(tri, ref, axis, planes.data(), bins, scale, first, last,
+                                                scalar_boxes.data(), parts.data());
+            std::array<canopy::detail::vector_bin, bins> vector_boxes;
+            for (auto& b : vector_boxes) b = {canopy::simd::float4(inf), canopy::simd::float4(-inf)};
+            canopy::detail::vector_bin const ref_lanes{canopy::to_lanes(ref.min), canopy::to_lanes(ref.max)};
+            canopy::detail::bin_reference_parts_vector(tri, ref_lanes, axis, planes.data(), bins, scale, first, last,
+                                                       vector_boxes.data());
+            for (int k = 0; k < bins; ++k) {
+                auto const& s = scalar_boxes[std::size_t(k)];
+                auto const vmin = canopy::from_lanes(vector_boxes[std::size_t(k)].lo);
+                auto const vmax = canopy::from_lanes(vector_boxes[std::size_t(k)].hi);
+                for (int c = 0; c < 3; ++c) {
+                    if (s.min[c] == vmin[c] && s.max[c] == vmax[c]) continue;
+                    INFO("iteration " << iteration << ", axis " << axis << ", bins " << first << ".." << last
+                                      << ", bin " << k << ", component " << c);
+                    CHECK(s.min[c] == vmin[c]);
+                    CHECK(s.max[c] == vmax[c]);
+                }
+            }
+        }
+        // Both paths of the sweep ran, many times.
+        CHECK(two_bins > 1000);
+        CHECK(more_bins > 10000);
+    }
+}

@@ -30,11 +30,19 @@ int bin_index(S x, S lo, S scale, int bins) {
     return int(f);
 }
 
+} // namespace canopy::detail
+
+export namespace canopy::detail {
+
 // A bin as the 4-lane binning of canopy.bvh:build fills it: its box in two vectors (lane 3
 // ignored) and its count.
 struct alignas(32) vector_bin {
     simd::float4 lo, hi;
 };
+
+} // namespace canopy::detail
+
+namespace canopy::detail {
 
 // Whether the builders bin with 4-lane vectors (float boxes, SSE or wider). canopy.bvh:build then
 // keeps its bins in bin_scratch::vector_bins, else in bin_scratch::bins (centroid_bins, one

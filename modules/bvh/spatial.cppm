@@ -189,6 +189,11 @@ struct spatial_choice {
     basic_aabb<S> left_box, right_box;
 };
 
+} // namespace canopy::detail
+
+// The spatial binning of one reference, exported for the tests that compare its two forms.
+export namespace canopy::detail {
+
 // The bin k of x among the planes (planes[k] ≤ x < planes[k + 1]; clamped to [0, bins)).
 template <typename S>
 int plane_bin(S x, S const* planes, int bins, S scale) {
@@ -264,12 +269,6 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
     // or below, one at or above its highest in bin last or above (plane_bin is monotonic): the
     // search only for the others.
     float const ref_lo = box.lo[axis], ref_hi = box.hi[axis];
-    auto const vertex_bin = [&](float x) {
-        if (x <= ref_lo) return first;
-        if (x >= ref_hi) return last;
-        return std::clamp(plane_bin(x, planes, bins, scale), first, last);
-    };
-    int const lo_bin = vertex_bin(lo_a), mid_bin = vertex_bin(mid_a), hi_bin = vertex_bin(hi_a);
     auto const on_axis = float4::iota() == float4(float(axis));
     auto const extend_by = [](vector_bin& b, float4 const& x) {
         b.lo = simd::min(x, b.lo);
@@ -279,6 +278,44 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
     auto const crossing = [&](float plane, float4 const& p, float4 const& d, float p_a, float q_a) {
         return simd::select(on_axis, float4(plane), p + d * float4((plane - p_a) / (q_a - p_a)));
     };
+    // Bin k's part clipped to the reference's box, into bin k.
+    auto const add_part = [&](int k, vector_bin const& part) {
+        float4 const clipped_lo = simd::max(part.lo, box.lo), clipped_hi = simd::min(part.hi, box.hi);
+        if ((simd::movemask(clipped_lo > clipped_hi) & 7u) == 0) {
+            boxes[k].lo = simd::min(clipped_lo, boxes[k].lo);
+            boxes[k].hi = simd::max(clipped_hi, boxes[k].hi);
+        }
+    };
+    if (last == first + 1) {
+        // Two bins (most references that straddle a plane): the loop below with its one plane,
+        // the same operations in the same order. There a vertex falls in bin last exactly when
+        // its coordinate is at least planes[last]: plane_bin is monotonic, and ref_lo <
+        // planes[last] ≤ ref_hi.
+        float const plane = planes[last];
+        bool const lo_last = !(lo_a < plane), mid_last = !(mid_a < plane), hi_last = !(hi_a < plane);
+        vector_bin part{float4(inf), float4(-inf)};
+        if (!lo_last) extend_by(part, p_lo);
+        if (!mid_last) extend_by(part, p_mid);
+        if (!hi_last) extend_by(part, p_hi);
+        vector_bin next{float4(inf), float4(-inf)}; // the crossings on the plane
+        if (plane > lo_a && plane < hi_a) extend_by(next, crossing(plane, p_lo, d_long, lo_a, hi_a));
+        if (plane > lo_a && plane < mid_a) extend_by(next, crossing(plane, p_lo, d_low, lo_a, mid_a));
+        else if (plane > mid_a && plane < hi_a) extend_by(next, crossing(plane, p_mid, d_high, mid_a, hi_a));
+        part.lo = simd::min(next.lo, part.lo);
+        part.hi = simd::max(next.hi, part.hi);
+        add_part(first, part);
+        if (lo_last) extend_by(next, p_lo);
+        if (mid_last) extend_by(next, p_mid);
+        if (hi_last) extend_by(next, p_hi);
+        add_part(last, next);
+        return;
+    }
+    auto const vertex_bin = [&](float x) {
+        if (x <= ref_lo) return first;
+        if (x >= ref_hi) return last;
+        return std::clamp(plane_bin(x, planes, bins, scale), first, last);
+    };
+    int const lo_bin = vertex_bin(lo_a), mid_bin = vertex_bin(mid_a), hi_bin = vertex_bin(hi_a);
     vector_bin part{float4(inf), float4(-inf)}; // bin k's points so far: the crossings on plane k
     for (int k = first; k <= last; ++k) {
         if (k == lo_bin) extend_by(part, p_lo);
@@ -293,11 +330,7 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
             part.lo = simd::min(next.lo, part.lo);
             part.hi = simd::max(next.hi, part.hi);
         }
-        float4 const clipped_lo = simd::max(part.lo, box.lo), clipped_hi = simd::min(part.hi, box.hi);
-        if ((simd::movemask(clipped_lo > clipped_hi) & 7u) == 0) {
-            boxes[k].lo = simd::min(clipped_lo, boxes[k].lo);
-            boxes[k].hi = simd::max(clipped_hi, boxes[k].hi);
-        }
+        add_part(k, part);
         part = next;
     }
 }
@@ -308,6 +341,10 @@ template <typename S>
 int last_plane_bin(S hi, int first, S const* planes, int bins, S scale) {
     return hi < planes[first + 1] ? first : plane_bin(hi, planes, bins, scale);
 }
+
+} // namespace canopy::detail
+
+namespace canopy::detail {
 
 // Adds the spatial bins of refs along `axis` (bins between `planes`) to boxes, enter and exit:
 // each bin's box grows by the parts of the references in it, enter / exit count the references
