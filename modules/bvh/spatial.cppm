@@ -265,10 +265,6 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
     float const lo_a = coord[lo], mid_a = coord[mid], hi_a = coord[hi];
     float4 const p_lo = lanes[lo], p_mid = lanes[mid], p_hi = lanes[hi];
     float4 const d_long = p_hi - p_lo, d_low = p_mid - p_lo, d_high = p_hi - p_mid;
-    // A vertex at or below the reference's lowest coordinate (first = its bin) falls in bin first
-    // or below, one at or above its highest in bin last or above (plane_bin is monotonic): the
-    // search only for the others.
-    float const ref_lo = box.lo[axis], ref_hi = box.hi[axis];
     auto const on_axis = float4::iota() == float4(float(axis));
     auto const extend_by = [](vector_bin& b, float4 const& x) {
         b.lo = simd::min(x, b.lo);
@@ -310,6 +306,10 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
         add_part(last, next);
         return;
     }
+    // A vertex at or below the reference's lowest coordinate (first = its bin) falls in bin first
+    // or below, one at or above its highest in bin last or above (plane_bin is monotonic): the
+    // search only for the others.
+    float const ref_lo = box.lo[axis], ref_hi = box.hi[axis];
     auto const vertex_bin = [&](float x) {
         if (x <= ref_lo) return first;
         if (x >= ref_hi) return last;
