@@ -943,11 +943,8 @@ TEST_CASE("spatial binning: the vector sweep gives the scalar clipping's part bo
             int const axis = rng.integer(0, 2);
             float const lo = node.min[axis], hi = node.max[axis];
             if (!(hi > lo)) continue;
-            std::array<float, bins + 1> planes{}; // as find_spatial_split places them
-            for (int k = 0; k < bins; ++k)
-                planes[std::size_t(k)] = float(double(lo) + (double(hi) - double(lo)) * double(k) / double(bins));
-            planes[bins] = hi;
-            float const scale = float(bins) / (hi - lo);
+            std::array<float, bins + 1> planes{};
+            float const scale = canopy::detail::place_spatial_planes(lo, hi, bins, planes.data());
             int const first = canopy::detail::plane_bin(ref.min[axis], planes.data(), bins, scale);
             int const last = canopy::detail::last_plane_bin(ref.max[axis], first, planes.data(), bins, scale);
             if (first == last) continue;

@@ -194,6 +194,17 @@ struct spatial_choice {
 // The spatial binning of one reference, exported for the tests that compare its two forms.
 export namespace canopy::detail {
 
+// The bins + 1 planes of spatial bins that split [lo, hi] (lo < hi) into equal parts, and the
+// scale that maps a coordinate to its bin estimate (bin_index).
+template <typename S>
+S place_spatial_planes(S lo, S hi, int bins, S* planes) {
+    auto const b = std::size_t(bins);
+    for (std::size_t k = 0; k < b; ++k)
+        planes[k] = S(double(lo) + (double(hi) - double(lo)) * double(k) / double(bins));
+    planes[b] = hi;
+    return S(bins) / (hi - lo);
+}
+
 // The bin k of x among the planes (planes[k] ≤ x < planes[k + 1]; clamped to [0, bins)).
 template <typename S>
 int plane_bin(S x, S const* planes, int bins, S scale) {
@@ -274,6 +285,15 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
     auto const crossing = [&](float plane, float4 const& p, float4 const& d, float p_a, float q_a) {
         return simd::select(on_axis, float4(plane), p + d * float4((plane - p_a) / (q_a - p_a)));
     };
+    // The points where the triangle's edges cross `plane` strictly: the long edge, and one of the
+    // two short ones.
+    auto const crossings_on = [&](float plane) {
+        vector_bin c{float4(inf), float4(-inf)};
+        if (plane > lo_a && plane < hi_a) extend_by(c, crossing(plane, p_lo, d_long, lo_a, hi_a));
+        if (plane > lo_a && plane < mid_a) extend_by(c, crossing(plane, p_lo, d_low, lo_a, mid_a));
+        else if (plane > mid_a && plane < hi_a) extend_by(c, crossing(plane, p_mid, d_high, mid_a, hi_a));
+        return c;
+    };
     // Bin k's part clipped to the reference's box, into bin k.
     auto const add_part = [&](int k, vector_bin const& part) {
         float4 const clipped_lo = simd::max(part.lo, box.lo), clipped_hi = simd::min(part.hi, box.hi);
@@ -293,10 +313,7 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
         if (!lo_last) extend_by(part, p_lo);
         if (!mid_last) extend_by(part, p_mid);
         if (!hi_last) extend_by(part, p_hi);
-        vector_bin next{float4(inf), float4(-inf)}; // the crossings on the plane
-        if (plane > lo_a && plane < hi_a) extend_by(next, crossing(plane, p_lo, d_long, lo_a, hi_a));
-        if (plane > lo_a && plane < mid_a) extend_by(next, crossing(plane, p_lo, d_low, lo_a, mid_a));
-        else if (plane > mid_a && plane < hi_a) extend_by(next, crossing(plane, p_mid, d_high, mid_a, hi_a));
+        vector_bin next = crossings_on(plane);
         part.lo = simd::min(next.lo, part.lo);
         part.hi = simd::max(next.hi, part.hi);
         add_part(first, part);
@@ -323,10 +340,7 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
         if (k == hi_bin) extend_by(part, p_hi);
         vector_bin next{float4(inf), float4(-inf)}; // the crossings on plane k + 1
         if (k < last) {
-            float const plane = planes[k + 1];
-            if (plane > lo_a && plane < hi_a) extend_by(next, crossing(plane, p_lo, d_long, lo_a, hi_a));
-            if (plane > lo_a && plane < mid_a) extend_by(next, crossing(plane, p_lo, d_low, lo_a, mid_a));
-            else if (plane > mid_a && plane < hi_a) extend_by(next, crossing(plane, p_mid, d_high, mid_a, hi_a));
+            next = crossings_on(planes[k + 1]);
             part.lo = simd::min(next.lo, part.lo);
             part.hi = simd::max(next.hi, part.hi);
         }
@@ -402,11 +416,7 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
         S const lo = bounds.min[axis], hi = bounds.max[axis];
         usable[axis] = hi > lo;
         if (!usable[axis]) continue;
-        S* const planes = scratch.planes.data() + std::size_t(axis) * (b + 1);
-        for (std::size_t k = 0; k < b; ++k)
-            planes[k] = S(double(lo) + (double(hi) - double(lo)) * double(k) / double(bins));
-        planes[b] = hi;
-        scale[axis] = S(bins) / (hi - lo);
+        scale[axis] = place_spatial_planes(lo, hi, bins, scratch.planes.data() + std::size_t(axis) * (b + 1));
     }
     std::fill(scratch.boxes.begin(), scratch.boxes.end(), basic_aabb<S>{});
     std::fill(scratch.enter.begin(), scratch.enter.end(), std::size_t(0));
