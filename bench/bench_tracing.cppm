@@ -52,13 +52,6 @@ void release_bvhs(canopy_scene& s) {
     for (auto& m : c.meshes) m.accel = {};
 }
 
-// Rebuilds the scene's BVHs with `options` (what the drivers time against Embree's build: the
-// mesh BVH, the instances and the top level) and counts their bytes.
-void rebuild(canopy_scene& s, bvh_build_options const& options) {
-    s.scene.build(options);
-    s.bytes = bvh_bytes(s.scene);
-}
-
 // The scene compiled with `options` for the mesh BVH (the top level over instances is no
 // triangle BVH: the quality does not apply to it).
 std::unique_ptr<canopy_scene> build_canopy(bench_scene const& in, bvh_build_options const& options = {}) {

@@ -6,7 +6,7 @@
 # A change to the traversal loop moves single workloads by ±3 % through code layout alone (a build
 # with -falign-loops=64 next to one without, the same source: docs/performance.md, Run 18); the
 # mean over many workloads is what tells a change from its layout. Build both binaries with the
-# same flags, and keep the machine otherwise idle.
+# same flags, and keep the machine otherwise idle. COMPARE_SET=batch compares the batch queries.
 set -euo pipefail
 [ $# -ge 2 ] || { sed -n 2,8p "$0" >&2; exit 2; }
 a=$1 b=$2 rounds=${3:-3} raw=${4:-$(mktemp)}
@@ -15,6 +15,13 @@ workloads=("sphere primary closest" "sphere shadow any" "sphere random closest" 
   "terrain shadow any" "soup primary closest" "soup shadow any" "engine primary closest" "engine shadow any"
   "engine random closest" "bunny primary closest" "bunny shadow any" "bunny primary any"
   "forest primary closest" "forest shadow any" "slivers primary closest" "slivers shadow any")
+# COMPARE_SET=batch: the batch queries instead (coherent primary and shadow rays in packets).
+if [ "${COMPARE_SET:-single}" = batch ]; then
+  workloads=("engine primary closest --batch" "engine primary any --batch" "engine shadow any --batch"
+    "bunny primary closest --batch" "bunny primary any --batch" "bunny shadow any --batch"
+    "sphere primary closest --batch" "sphere primary any --batch" "soup primary closest --batch"
+    "slivers primary closest --batch" "slivers primary any --batch" "forest primary closest --batch")
+fi
 for r in $(seq "$rounds"); do
   for w in "${workloads[@]}"; do
     for bin in "$a" "$b"; do

@@ -718,6 +718,22 @@ TEST_CASE("build_quality::automatic: the sliver box share, by hand, and the qual
     triangle const broken{{nan, 0, 0}, {1, 0, 0}, {0, 1, 0}, 3, 0};
     CHECK(canopy::sliver_box_share(std::span<triangle const>(std::vector<triangle>{right, point, broken})) == 0.0);
 
+    // Over many chunks (sliver_chunk triangles each, summed in parallel): the share of a mix whose
+    // exact value is known, bit for bit the same on one thread and on two.
+    {
+        std::size_t const chunks = 5;
+        std::vector<triangle> many;
+        for (std::size_t i = 0; i < chunks * canopy::sliver_chunk + 3; ++i) many.push_back(i % 4 == 0 ? needle : right);
+        double const needles = double((many.size() + 3) / 4), rights = double(many.size()) - needles;
+        double shares[2];
+        for (int threads = 1; threads <= 2; ++threads) {
+            tbb::global_control const limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+            shares[threads - 1] = canopy::sliver_box_share(std::span<triangle const>(many));
+        }
+        CHECK(shares[0] == shares[1]);
+        CHECK(shares[0] == Approx(64.5 * needles / (64.5 * needles + 8.0 * rights)).epsilon(1e-12));
+    }
+
     // The default is automatic: well-shaped triangles build fast, slivers build high, and both
     // say so; explicit qualities are kept.
     random_source rng(77);
