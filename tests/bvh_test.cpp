@@ -579,7 +579,8 @@ TEST_CASE("the same tree on one thread and on two, whatever the parallel thresho
         for (auto const quality : {canopy::build_quality::fast, canopy::build_quality::high}) {
             INFO(name << (quality == canopy::build_quality::high ? ", high" : ", fast"));
             // parallel_threshold 16: subtrees of 16 references and more are tasks, and the
-            // spatial bins of nodes of 64 and more are filled in chunks of 16, in parallel.
+            // object bins (fast) or spatial bins (high) of nodes of 64 and more are filled in
+            // chunks of 16, in parallel.
             auto const build = [&](std::size_t threads, std::size_t threshold) {
                 tbb::global_control const limit(tbb::global_control::max_allowed_parallelism, threads);
                 return canopy::build_binned_sah(input, {.parallel_threshold = threshold, .quality = quality});

@@ -2,7 +2,9 @@
 // fast Construction of SAH-based Bounding Volume Hierarchies") over the primitives' centroids on
 // all three axes, subtrees built in parallel (oneTBB task groups). The primitives' boxes are
 // partitioned in place as 32-byte references (prim_ref, Embree's PrimRef); float boxes are binned
-// and swept with 4-lane vectors, the three axes at once (vector_binning). canopy.bvh:build runs it
+// and swept with 4-lane vectors, the three axes at once (vector_binning), nodes of 4 ×
+// parallel_threshold references and more in parallel chunks (bin_refs_in_parallel: the same bins,
+// so the same tree, on any number of threads). canopy.bvh:build runs it
 // on all the primitives; canopy.bvh:spatial on the subtrees where its budget of references is
 // spent, and bins and partitions its own nodes' references with the same steps (object_split,
 // partition_object).
@@ -119,6 +121,40 @@ void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::siz
     }
 }
 
+// bin_refs over fixed chunks of `chunk` references in parallel (nodes of at least 4 chunks: the
+// first levels of a build, which would otherwise bin on one thread while the other waits), the
+// chunks' bins merged in chunk order. Boxes merge by min and max and counts by sums, so the bins,
+// and the tree, are those of bin_refs, however the chunks are scheduled.
+template <typename S>
+    requires vector_binning<S>
+void bin_refs_in_parallel(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::size_t begin,
+                          std::size_t end, std::size_t chunk, bin_scratch<S>& scratch) {
+    std::size_t const chunks = (end - begin + chunk - 1) / chunk;
+    std::size_t const n = 3 * std::size_t(binning.bins);
+    std::vector<vector_bin> boxes(chunks * n);
+    std::vector<std::uint32_t> counts(chunks * n);
+    parallel_for_chunks(chunks, 1, [&](std::size_t first, std::size_t last) {
+        bin_scratch<S> own(binning.bins);
+        for (std::size_t c = first; c < last; ++c) {
+            std::size_t const from = begin + c * chunk;
+            bin_refs(binning, refs, from, std::min(end, from + chunk), own);
+            std::copy_n(own.vector_bins.begin(), n, boxes.begin() + std::ptrdiff_t(c * n));
+            std::copy_n(own.vector_counts.begin(), n, counts.begin() + std::ptrdiff_t(c * n));
+        }
+    });
+    for (std::size_t k = 0; k < n; ++k) {
+        vector_bin merged = boxes[k];
+        std::uint32_t count = counts[k];
+        for (std::size_t c = 1; c < chunks; ++c) {
+            merged.lo = simd::min(boxes[c * n + k].lo, merged.lo);
+            merged.hi = simd::max(boxes[c * n + k].hi, merged.hi);
+            count += counts[c * n + k];
+        }
+        scratch.vector_bins[k] = merged;
+        scratch.vector_counts[k] = count;
+    }
+}
+
 // centroid_bins::best_split over the vector bins: the sweeps of the three axes run together, one
 // axis per lane, on the bins transposed (lane a of plane row c, bin k: coordinate c of the box
 // of bin k on axis a). Each lane computes the float areas of canopy.math's surface_area with the
@@ -232,7 +268,15 @@ inline int bins_for(int bins, std::size_t count) {
 template <typename S>
 split_choice object_split(build_context<S> const& ctx, bin_scratch<S>& scratch, centroid_bins<S> const& binning,
                           std::size_t begin, std::size_t end) {
-    bin_refs(binning, ctx.refs.data(), begin, end, scratch);
+    std::size_t const chunk = std::max<std::size_t>(ctx.options.parallel_threshold, 1);
+    if constexpr (vector_binning<S>) {
+        if (end - begin >= 4 * chunk)
+            bin_refs_in_parallel(binning, ctx.refs.data(), begin, end, chunk, scratch);
+        else
+            bin_refs(binning, ctx.refs.data(), begin, end, scratch);
+    } else {
+        bin_refs(binning, ctx.refs.data(), begin, end, scratch);
+    }
     if constexpr (vector_binning<S>)
         return best_split_vector(binning, scratch, end - begin, ctx.block_size);
     else
