@@ -579,8 +579,9 @@ TEST_CASE("the same tree on one thread and on two, whatever the parallel thresho
         for (auto const quality : {canopy::build_quality::fast, canopy::build_quality::high}) {
             INFO(name << (quality == canopy::build_quality::high ? ", high" : ", fast"));
             // parallel_threshold 16: subtrees of 16 references and more are tasks, and the
-            // object bins (fast) or spatial bins (high) of nodes of 64 and more are filled in
-            // chunks of 16, in parallel.
+            // object bins (fast) or spatial bins (high) of nodes of parallel_binning_min (1,024)
+            // references and more are filled in chunks (bin_chunk: the 3,000 needles' root in 64
+            // chunks of 47), in parallel.
             auto const build = [&](std::size_t threads, std::size_t threshold) {
                 tbb::global_control const limit(tbb::global_control::max_allowed_parallelism, threads);
                 return canopy::build_binned_sah(input, {.parallel_threshold = threshold, .quality = quality});
@@ -589,6 +590,8 @@ TEST_CASE("the same tree on one thread and on two, whatever the parallel thresho
             CHECK(same_tree(one, build(2, 16)));
             CHECK(same_tree(one, build(2, 16)));
             CHECK(same_tree(one, build(1, std::size_t(1) << 30))); // no task, no chunk
+            // parallel_threshold 1: every node a task; at most max_bin_chunks chunks per node.
+            CHECK(same_tree(one, build(2, 1)));
         }
     }
     // Double-precision triangles take the scalar binning: the same, with chunks and without.

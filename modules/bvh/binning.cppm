@@ -3,6 +3,7 @@
 module;
 // No FMA contraction here, whatever -ffp-contract says (why: README.md, "Accuracy").
 #pragma STDC FP_CONTRACT OFF
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cstddef>
@@ -52,6 +53,22 @@ namespace canopy::detail {
 // vector_bins then, with the same results as its scalar binning.
 template <typename S>
 inline constexpr bool vector_binning = std::is_same_v<S, float> && simd::native_width<4>;
+
+// Binning a node's references in parallel chunks (canopy.bvh:object, bin_refs_in_parallel;
+// canopy.bvh:spatial, find_spatial_split). A chunk is the options' parallel_threshold references,
+// but never so small that a node has more than max_bin_chunks chunks (their bins are all held
+// until they are merged: a threshold of 1 would otherwise hold a set of bins per reference); and
+// a node bins in parallel when it has at least 4 chunks and parallel_binning_min references
+// (below that, the merge and the tasks cost what they save). Both depend on the node's size and
+// the options only, never on the number of threads, and the bins are the same either way.
+inline constexpr std::size_t max_bin_chunks = 64;
+inline constexpr std::size_t parallel_binning_min = 1024;
+inline std::size_t bin_chunk(std::size_t parallel_threshold, std::size_t count) {
+    return std::max({parallel_threshold, std::size_t(1), (count + max_bin_chunks - 1) / max_bin_chunks});
+}
+inline bool bins_in_parallel(std::size_t parallel_threshold, std::size_t count) {
+    return count >= parallel_binning_min && count >= 4 * bin_chunk(parallel_threshold, count);
+}
 
 // Per-task working memory of the binning: 3 · bins bins and one sweep array; for the 4-lane
 // binning of canopy.bvh:build, its bins with their counts and its sweep's transposed bins, counts

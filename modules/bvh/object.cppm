@@ -2,9 +2,9 @@
 // fast Construction of SAH-based Bounding Volume Hierarchies") over the primitives' centroids on
 // all three axes, subtrees built in parallel (oneTBB task groups). The primitives' boxes are
 // partitioned in place as 32-byte references (prim_ref, Embree's PrimRef); float boxes are binned
-// and swept with 4-lane vectors, the three axes at once (vector_binning), nodes of 4 ×
-// parallel_threshold references and more in parallel chunks (bin_refs_in_parallel: the same bins,
-// so the same tree, on any number of threads). canopy.bvh:build runs it
+// and swept with 4-lane vectors, the three axes at once (vector_binning), large nodes in parallel
+// chunks (bins_in_parallel, bin_refs_in_parallel: the same bins, so the same tree, on any number
+// of threads). canopy.bvh:build runs it
 // on all the primitives; canopy.bvh:spatial on the subtrees where its budget of references is
 // spent, and bins and partitions its own nodes' references with the same steps (object_split,
 // partition_object).
@@ -121,8 +121,8 @@ void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::siz
     }
 }
 
-// bin_refs over fixed chunks of `chunk` references in parallel (nodes of at least 4 chunks: the
-// first levels of a build, which would otherwise bin on one thread while the other waits), the
+// bin_refs over fixed chunks of `chunk` references in parallel (bins_in_parallel: the first
+// levels of a build, which would otherwise bin on one thread while the other waits), the
 // chunks' bins merged in chunk order. Boxes merge by min and max and counts by sums, so the bins,
 // and the tree, are those of bin_refs, however the chunks are scheduled.
 template <typename S>
@@ -268,10 +268,10 @@ inline int bins_for(int bins, std::size_t count) {
 template <typename S>
 split_choice object_split(build_context<S> const& ctx, bin_scratch<S>& scratch, centroid_bins<S> const& binning,
                           std::size_t begin, std::size_t end) {
-    std::size_t const chunk = std::max<std::size_t>(ctx.options.parallel_threshold, 1);
     if constexpr (vector_binning<S>) {
-        if (end - begin >= 4 * chunk)
-            bin_refs_in_parallel(binning, ctx.refs.data(), begin, end, chunk, scratch);
+        std::size_t const threshold = ctx.options.parallel_threshold, count = end - begin;
+        if (bins_in_parallel(threshold, count))
+            bin_refs_in_parallel(binning, ctx.refs.data(), begin, end, bin_chunk(threshold, count), scratch);
         else
             bin_refs(binning, ctx.refs.data(), begin, end, scratch);
     } else {

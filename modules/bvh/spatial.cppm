@@ -403,8 +403,8 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
 }
 
 // The cheapest spatial split of refs (bounded by `bounds`) over `bins` planes per axis. Nodes of
-// at least 4 × parallel_threshold references bin in parallel: the three axes of fixed chunks of
-// parallel_threshold references each, merged in chunk order. Boxes merge by min and max and counts
+// canopy.bvh:binning's bins_in_parallel bin in parallel: the three axes of each fixed chunk
+// (bin_chunk), merged in chunk order. Boxes merge by min and max and counts
 // by sums, so the bins, and the tree, are the same however the chunks are scheduled.
 template <typename Prim, typename S>
 spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_scratch<S>& scratch,
@@ -421,8 +421,9 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
     std::fill(scratch.boxes.begin(), scratch.boxes.end(), basic_aabb<S>{});
     std::fill(scratch.enter.begin(), scratch.enter.end(), std::size_t(0));
     std::fill(scratch.exit.begin(), scratch.exit.end(), std::size_t(0));
-    std::size_t const chunk = std::max<std::size_t>(ctx.object.options.parallel_threshold, 1);
-    if (refs.size() < 4 * chunk) {
+    std::size_t const threshold = ctx.object.options.parallel_threshold;
+    std::size_t const chunk = bin_chunk(threshold, refs.size());
+    if (!bins_in_parallel(threshold, refs.size())) {
         for (int axis = 0; axis < 3; ++axis) {
             if (!usable[axis]) continue;
             std::size_t const at = std::size_t(axis) * b;
