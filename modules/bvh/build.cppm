@@ -56,20 +56,20 @@ double sliver_box_share(std::span<basic_triangle<T> const> prims) {
     std::size_t const chunks = (prims.size() + sliver_chunk - 1) / sliver_chunk;
     std::vector<std::array<double, 2>> sums(chunks); // per chunk: all, slivers
     parallel_for_chunks(chunks, 1, [&](std::size_t first, std::size_t last) {
-        for (std::size_t c = first; c < last; ++c) {
+        for (std::size_t chunk = first; chunk < last; ++chunk) {
             double total = 0.0, sliver = 0.0;
-            for (std::size_t i = c * sliver_chunk, end = std::min(prims.size(), i + sliver_chunk); i < end; ++i) {
+            for (std::size_t i = chunk * sliver_chunk, end = std::min(prims.size(), i + sliver_chunk); i < end; ++i) {
                 auto const& t = prims[i];
-                vec3<double> const a(t.v0), b(t.v1), c3(t.v2);
-                vec3<double> const lo = min(min(a, b), c3), hi = max(max(a, b), c3);
+                vec3<double> const a(t.v0), b(t.v1), c(t.v2);
+                vec3<double> const lo = min(min(a, b), c), hi = max(max(a, b), c);
                 vec3<double> const e = hi - lo;
                 double const half_area = e.x * e.y + e.y * e.z + e.z * e.x;
-                double const area = 0.5 * length(cross(b - a, c3 - a));
+                double const area = 0.5 * length(cross(b - a, c - a));
                 if (!(half_area < std::numeric_limits<double>::infinity())) continue; // NaN or infinite: not measured
                 total += half_area;
                 if (half_area > 64.0 * area) sliver += half_area;
             }
-            sums[c] = {total, sliver};
+            sums[chunk] = {total, sliver};
         }
     });
     double total = 0.0, sliver = 0.0;

@@ -3,8 +3,7 @@
 // all three axes, subtrees built in parallel (oneTBB task groups). The primitives' boxes are
 // partitioned in place as 32-byte references (prim_ref, Embree's PrimRef); float boxes are binned
 // and swept with 4-lane vectors, the three axes at once (vector_binning), large nodes in parallel
-// chunks (bins_in_parallel, bin_refs_in_parallel: the same bins, so the same tree, on any number
-// of threads). canopy.bvh:build runs it
+// chunks (bin_refs: the same bins, so the same tree, on any number of threads). canopy.bvh:build runs it
 // on all the primitives; canopy.bvh:spatial on the subtrees where its budget of references is
 // spent, and bins and partitions its own nodes' references with the same steps (object_split,
 // partition_object).
@@ -77,54 +76,47 @@ range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::s
     return r;
 }
 
-// Bins refs[begin, end) on the three axes, as centroid_bins::add does one primitive at a time.
-// With vector_binning, the three axes' bin indices come from one vector computation and each
-// bin's box grows by one 4-lane min and max, with the same rules lane by lane (bin_index: NaN and
-// values below the range in bin 0, values above it in the last bin; extend: NaN coordinates
-// ignored), so the bins of every usable axis hold the same boxes and counts (the others, which
-// the sweep skips, are filled too instead of tested for).
+// Grows bin b by the box [lo, hi]: min(new, b) and max(new, b), so that a NaN coordinate of the
+// new box leaves b's as it was (x86 min and max return their second operand then).
+[[gnu::always_inline]] inline void grow_bin(vector_bin& b, simd::float4 lo, simd::float4 hi) {
+    b.lo = simd::min(lo, b.lo);
+    b.hi = simd::max(hi, b.hi);
+}
+
+// The vector form of bin_refs below, into the 3 · binning.bins bins and counts given.
 template <typename S>
-void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::size_t begin, std::size_t end,
-              bin_scratch<S>& scratch) {
-    if constexpr (vector_binning<S>) {
-        using simd::float4;
-        using simd::int4;
-        std::size_t const n = 3 * std::size_t(binning.bins);
-        vector_bin* const boxes = scratch.vector_bins.data();
-        std::uint32_t* const counts = scratch.vector_counts.data();
-        float const inf = std::numeric_limits<float>::infinity();
-        for (std::size_t k = 0; k < n; ++k) {
-            boxes[k] = {float4(inf), float4(-inf)};
-            counts[k] = 0;
+    requires vector_binning<S>
+void bin_refs_vector(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::size_t begin, std::size_t end,
+                     vector_bin* boxes, std::uint32_t* counts) {
+    using simd::float4;
+    using simd::int4;
+    std::size_t const n = 3 * std::size_t(binning.bins);
+    float const inf = std::numeric_limits<float>::infinity();
+    for (std::size_t k = 0; k < n; ++k) {
+        boxes[k] = {float4(inf), float4(-inf)};
+        counts[k] = 0;
+    }
+    float4 const lo = to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]));
+    float4 const scale = to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]));
+    float4 const last(float(binning.bins - 1));
+    int4 const first_of_axis = int4::iota() * int4(binning.bins);
+    for (std::size_t i = begin; i < end; ++i) {
+        float4 const box_lo = float4::load(&refs[i].lo.x), box_hi = float4::load(&refs[i].hi.x);
+        // max(f, 0) takes 0 for NaN (the second operand), as bin_index does.
+        float4 const f = simd::min(simd::max((box_lo + box_hi - lo) * scale, float4(0.0f)), last);
+        alignas(16) std::int32_t slot[4];
+        (simd::convert_to_int(f) + first_of_axis).store_aligned(slot);
+        for (int a = 0; a < 3; ++a) {
+            grow_bin(boxes[std::size_t(slot[a])], box_lo, box_hi);
+            ++counts[std::size_t(slot[a])];
         }
-        float4 const lo = to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]));
-        float4 const scale = to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]));
-        float4 const last(float(binning.bins - 1));
-        int4 const first_of_axis = int4::iota() * int4(binning.bins);
-        for (std::size_t i = begin; i < end; ++i) {
-            float4 const box_lo = float4::load(&refs[i].lo.x), box_hi = float4::load(&refs[i].hi.x);
-            // max(f, 0) takes 0 for NaN (the second operand), as bin_index does.
-            float4 const f = simd::min(simd::max((box_lo + box_hi - lo) * scale, float4(0.0f)), last);
-            alignas(16) std::int32_t slot[4];
-            (simd::convert_to_int(f) + first_of_axis).store_aligned(slot);
-            for (int a = 0; a < 3; ++a) {
-                auto& b = boxes[std::size_t(slot[a])];
-                b.lo = simd::min(box_lo, b.lo);
-                b.hi = simd::max(box_hi, b.hi);
-                ++counts[std::size_t(slot[a])];
-            }
-        }
-    } else {
-        bin<S>* const bin_data = scratch.bins.data();
-        binning.clear(bin_data);
-        for (std::size_t i = begin; i < end; ++i) binning.add(bin_data, refs[i].box(), refs[i].doubled_center());
     }
 }
 
-// bin_refs over fixed chunks of `chunk` references in parallel (bins_in_parallel: the first
-// levels of a build, which would otherwise bin on one thread while the other waits), the
-// chunks' bins merged in chunk order. Boxes merge by min and max and counts by sums, so the bins,
-// and the tree, are those of bin_refs, however the chunks are scheduled.
+// bin_refs_vector over fixed chunks of `chunk` references in parallel (bins_in_parallel: the
+// first levels of a build, which would otherwise bin on one thread while the other waits), each
+// chunk into bins of its own, merged in chunk order. Boxes merge by min and max and counts by
+// sums, so the bins, and the tree, are those of one pass, however the chunks are scheduled.
 template <typename S>
     requires vector_binning<S>
 void bin_refs_in_parallel(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::size_t begin,
@@ -134,24 +126,43 @@ void bin_refs_in_parallel(centroid_bins<S> const& binning, prim_ref<S> const* re
     std::vector<vector_bin> boxes(chunks * n);
     std::vector<std::uint32_t> counts(chunks * n);
     parallel_for_chunks(chunks, 1, [&](std::size_t first, std::size_t last) {
-        bin_scratch<S> own(binning.bins);
         for (std::size_t c = first; c < last; ++c) {
             std::size_t const from = begin + c * chunk;
-            bin_refs(binning, refs, from, std::min(end, from + chunk), own);
-            std::copy_n(own.vector_bins.begin(), n, boxes.begin() + std::ptrdiff_t(c * n));
-            std::copy_n(own.vector_counts.begin(), n, counts.begin() + std::ptrdiff_t(c * n));
+            bin_refs_vector(binning, refs, from, std::min(end, from + chunk), boxes.data() + c * n, counts.data() + c * n);
         }
     });
     for (std::size_t k = 0; k < n; ++k) {
         vector_bin merged = boxes[k];
         std::uint32_t count = counts[k];
         for (std::size_t c = 1; c < chunks; ++c) {
-            merged.lo = simd::min(boxes[c * n + k].lo, merged.lo);
-            merged.hi = simd::max(boxes[c * n + k].hi, merged.hi);
+            grow_bin(merged, boxes[c * n + k].lo, boxes[c * n + k].hi);
             count += counts[c * n + k];
         }
         scratch.vector_bins[k] = merged;
         scratch.vector_counts[k] = count;
+    }
+}
+
+// Bins refs[begin, end) on the three axes, as centroid_bins::add does one primitive at a time.
+// With vector_binning, the three axes' bin indices come from one vector computation and each
+// bin's box grows by one 4-lane min and max, with the same rules lane by lane (bin_index: NaN and
+// values below the range in bin 0, values above it in the last bin; extend: NaN coordinates
+// ignored), so the bins of every usable axis hold the same boxes and counts (the others, which
+// the sweep skips, are filled too instead of tested for); large nodes in parallel chunks
+// (bins_in_parallel with the options' parallel_threshold).
+template <typename S>
+void bin_refs(centroid_bins<S> const& binning, prim_ref<S> const* refs, std::size_t begin, std::size_t end,
+              std::size_t parallel_threshold, bin_scratch<S>& scratch) {
+    if constexpr (vector_binning<S>) {
+        std::size_t const count = end - begin;
+        if (bins_in_parallel(parallel_threshold, count))
+            bin_refs_in_parallel(binning, refs, begin, end, bin_chunk(parallel_threshold, count), scratch);
+        else
+            bin_refs_vector(binning, refs, begin, end, scratch.vector_bins.data(), scratch.vector_counts.data());
+    } else {
+        bin<S>* const bin_data = scratch.bins.data();
+        binning.clear(bin_data);
+        for (std::size_t i = begin; i < end; ++i) binning.add(bin_data, refs[i].box(), refs[i].doubled_center());
     }
 }
 
@@ -250,9 +261,7 @@ void side_bounds_vector(centroid_bins<S> const& binning, bin_scratch<S> const& s
     float const inf = std::numeric_limits<float>::infinity();
     vector_bin sides[2] = {{simd::float4(inf), simd::float4(-inf)}, {simd::float4(inf), simd::float4(-inf)}};
     for (int k = 0; k < binning.bins; ++k) {
-        auto& side = sides[k < split.split ? 0 : 1];
-        side.lo = simd::min(b[k].lo, side.lo);
-        side.hi = simd::max(b[k].hi, side.hi);
+        grow_bin(sides[k < split.split ? 0 : 1], b[k].lo, b[k].hi);
     }
     left = {from_lanes(sides[0].lo), from_lanes(sides[0].hi)};
     right = {from_lanes(sides[1].lo), from_lanes(sides[1].hi)};
@@ -268,15 +277,7 @@ inline int bins_for(int bins, std::size_t count) {
 template <typename S>
 split_choice object_split(build_context<S> const& ctx, bin_scratch<S>& scratch, centroid_bins<S> const& binning,
                           std::size_t begin, std::size_t end) {
-    if constexpr (vector_binning<S>) {
-        std::size_t const threshold = ctx.options.parallel_threshold, count = end - begin;
-        if (bins_in_parallel(threshold, count))
-            bin_refs_in_parallel(binning, ctx.refs.data(), begin, end, bin_chunk(threshold, count), scratch);
-        else
-            bin_refs(binning, ctx.refs.data(), begin, end, scratch);
-    } else {
-        bin_refs(binning, ctx.refs.data(), begin, end, scratch);
-    }
+    bin_refs(binning, ctx.refs.data(), begin, end, ctx.options.parallel_threshold, scratch);
     if constexpr (vector_binning<S>)
         return best_split_vector(binning, scratch, end - begin, ctx.block_size);
     else
