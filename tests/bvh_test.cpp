@@ -432,6 +432,94 @@ TEST_CASE("instance bounds hold the transformed geometry") {
     }
 }
 
+// Whether any used slot of b's wide nodes has a subnormal plane.
+template <typename Prim>
+bool has_subnormal_plane(canopy::bvh<Prim> const& b) {
+    for (auto const& node : b.wide_nodes)
+        for (int i = 0; i < canopy::bvh_width; ++i) {
+            if (!node.used(i)) continue;
+            auto const box = node.child_bounds(i);
+            for (int a = 0; a < 3; ++a)
+                if (std::fpclassify(box.min[a]) == FP_SUBNORMAL || std::fpclassify(box.max[a]) == FP_SUBNORMAL)
+                    return true;
+        }
+    return false;
+}
+
+TEST_CASE("wide nodes round subnormal box sides outward, so that node tests never read a subnormal") {
+    using node = canopy::wide_bvh_node<float>;
+    float const smallest = std::numeric_limits<float>::min(), sub = std::numeric_limits<float>::denorm_min();
+    // By hand: a lower side goes down, an upper side up, to 0 or to ±smallest normal.
+    CHECK(node::outward_from_subnormal(3 * sub, false) == 0.0f);
+    CHECK(node::outward_from_subnormal(3 * sub, true) == smallest);
+    CHECK(node::outward_from_subnormal(-3 * sub, false) == -smallest);
+    CHECK(node::outward_from_subnormal(-3 * sub, true) == 0.0f);
+    CHECK(node::outward_from_subnormal(smallest / 2, true) == smallest);
+    for (float const x : {0.0f, -0.0f, smallest, -smallest, 1.5f, -2e-30f, inf, -inf})
+        for (bool const up : {false, true}) {
+            float const y = node::outward_from_subnormal(x, up);
+            CHECK(std::memcmp(&x, &y, sizeof x) == 0);
+        }
+    CHECK(std::isnan(node::outward_from_subnormal(std::numeric_limits<float>::quiet_NaN(), true)));
+
+    // Triangles with subnormal coordinates: their leaves' boxes still hold them, with no subnormal
+    // plane, and rays find what brute force finds.
+    random_source rng(61);
+    std::vector<triangle> tiny;
+    for (int i = 0; i < 64; ++i) {
+        float const x = float(i % 8) - 4.0f, z = float(i / 8) - 4.0f;
+        float const y = (i % 3 == 0 ? 1.0f : -1.0f) * float(1 + i % 5) * 1e-40f; // subnormal heights
+        tiny.push_back({{x, y, z}, {x + 1.0f, -y, z}, {x, y, z + 1.0f}, 0, 0});
+    }
+    mesh_bvh const flat = canopy::build_binned_sah(tiny);
+    canopy::aabb input_box;
+    for (auto const& t : tiny) input_box = extend(input_box, get_bounds(t));
+    REQUIRE(std::fpclassify(input_box.min.y) == FP_SUBNORMAL);
+    CHECK_FALSE(has_subnormal_plane(flat));
+    check_wide_tree(flat);
+    for (int k = 0; k < 200; ++k) {
+        ray r{rng.point(-4.0f, 4.0f) + vec3<float>(0.0f, 3.0f, 0.0f), 0.0f, vec3<float>(0.0f, -1.0f, 0.0f) + rng.point(-0.2f, 0.2f), inf};
+        canopy::basic_hit_record<float> best;
+        for (auto const& t : tiny) {
+            auto const h = canopy::intersect(r, t);
+            if (h.hit && (!best.hit || h.t < best.t)) best = h;
+        }
+        auto const hr = canopy::closest_hit(r, &flat, &flat + 1);
+        CHECK(hr.hit == best.hit);
+        if (hr.hit && best.hit) CHECK(hr.t == best.t);
+    }
+
+    // Trees standing on y = 0, placed by instances: transform_box widens each instance's world box
+    // by subnormals for products that underflow (min.y = -3 denorm_min), which the instances'
+    // BVH must not store.
+    std::vector<triangle> tree;
+    for (int i = 0; i < 16; ++i) {
+        float const a = float(i) * 0.4f;
+        tree.push_back({{std::cos(a), 0.0f, std::sin(a)}, {0.0f, 2.0f, 0.0f}, {std::cos(a + 0.4f), 0.0f, std::sin(a + 0.4f)}, 0, 0});
+    }
+    mesh_bvh const mesh = canopy::build_binned_sah(tree);
+    std::vector<test_support::mesh_instance> placed;
+    for (int i = 0; i < 40; ++i) {
+        float const angle = rng.uniform(0.0f, 6.0f), s = rng.uniform(0.7f, 1.3f);
+        float const c = s * std::cos(angle), n = s * std::sin(angle);
+        auto const xf = canopy::affine_transform<float>::from_rows(
+            {c, 0, n, 5.0f * float(i % 8), 0, s, 0, 0, -n, 0, c, 5.0f * float(i / 8)});
+        placed.emplace_back(mesh, xf, std::uint32_t(i));
+    }
+    REQUIRE(std::fpclassify(get_bounds(placed[0]).min.y) == FP_SUBNORMAL);
+    canopy::bvh<test_support::mesh_instance> const forest = canopy::build_binned_sah(placed);
+    CHECK_FALSE(has_subnormal_plane(forest));
+    check_wide_tree(forest);
+    for (int k = 0; k < 200; ++k) {
+        ray r{vec3<float>(rng.uniform(-2.0f, 37.0f), 1.0f, -10.0f), 0.0f,
+              vec3<float>(rng.uniform(-0.3f, 0.3f), rng.uniform(-0.15f, 0.05f), 1.0f), inf};
+        auto const expected = test_support::instanced_brute_force_hits(r, placed, tree);
+        auto const hr = canopy::closest_hit(r, &forest, &forest + 1);
+        REQUIRE(hr.hit == !expected.empty());
+        if (hr.hit) CHECK(hr.t == expected.front().t);
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // build_quality::high (spatial splits): a triangle may be referenced from several leaves, each
 // leaf box bounding only its part of it.

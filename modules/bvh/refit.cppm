@@ -53,14 +53,6 @@ basic_aabb<S> node_bounds(wide_bvh_node<S> const& w) {
     return box;
 }
 
-template <typename S>
-void set_slot_bounds(wide_bvh_node<S>& w, std::size_t slot, basic_aabb<S> const& box) {
-    for (std::size_t a = 0; a < 3; ++a) {
-        w.planes[w.min_row(a)][slot] = box.min[int(a)];
-        w.planes[w.max_row(a)][slot] = box.max[int(a)];
-    }
-}
-
 // The leaves' boxes from what they store, then every inner box bottom-up, then the root's.
 template <typename Prim>
 void refit_boxes(bvh<Prim>& b) {
@@ -74,7 +66,7 @@ void refit_boxes(bvh<Prim>& b) {
                 if (w.count[slot] == 0) continue;
                 basic_aabb<S> box;
                 for_each_leaf_primitive(b, w.child[slot], w.count[slot], [&](Prim const& p) { box = extend(box, get_bounds(p)); });
-                set_slot_bounds(w, slot, box);
+                w.set_child_bounds(slot, box);
             }
         }
     });
@@ -82,7 +74,7 @@ void refit_boxes(bvh<Prim>& b) {
         auto& w = b.wide_nodes[i];
         for (int k = 0; k < bvh_width; ++k) {
             auto const slot = std::size_t(k);
-            if (w.used(k) && w.count[slot] == 0) set_slot_bounds(w, slot, node_bounds(b.wide_nodes[w.child[slot]]));
+            if (w.used(k) && w.count[slot] == 0) w.set_child_bounds(slot, node_bounds(b.wide_nodes[w.child[slot]]));
         }
     }
     // In place: instances point at this box (bvh_storage).

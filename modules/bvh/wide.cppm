@@ -140,10 +140,7 @@ struct optimal_collapse {
             std::uint32_t child = c.index;
             if (!c.is_leaf()) child = emit(slots[i], wide);
             auto& w = wide[index]; // emit may have reallocated
-            for (int a = 0; a < 3; ++a) {
-                w.planes[w.min_row(std::size_t(a))][k] = c.bounds.min[a];
-                w.planes[w.max_row(std::size_t(a))][k] = c.bounds.max[a];
-            }
+            w.set_child_bounds(k, c.bounds);
             w.child[k] = child;
             w.count[k] = c.count;
         }
@@ -225,7 +222,7 @@ void finish_build(bvh<Prim>& result, std::span<bvh_node<bounds_value_t<Prim>> co
                   std::vector<std::uint32_t> const& order) {
     auto clock = std::chrono::steady_clock::now();
     result.wide_nodes = collapse_to_wide(nodes);
-    result.root_bounds.assign(1, nodes[0].bounds);
+    result.root_bounds.assign(1, wide_bvh_node<bounds_value_t<Prim>>::stored_box(nodes[0].bounds));
     result.build_phases.wide_nodes = lap(clock);
     result.size = prims.size();
     if constexpr (stores_triangle_blocks_v<Prim>) {
