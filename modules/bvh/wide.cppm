@@ -41,15 +41,15 @@ namespace detail {
 // tree depends only on the binary tree.
 template <typename S>
 struct optimal_collapse {
+    using costs = std::array<double, bvh_width + 1>; // F(n, k) for k = 1 … bvh_width ([0] unused)
     std::span<bvh_node<S> const> nodes;
-    // Written for every node before they are read (solve), so left unzeroed (build_buffer).
-    build_buffer<std::array<double, bvh_width + 1>> cost;             // F(n, k) for k = 1 … bvh_width
+    // Written for every node before they are read (solve), so left unzeroed (build_buffer). The
+    // costs F are not kept: each node's are returned to its parent, the only reader.
     build_buffer<std::array<std::uint8_t, 2 * (bvh_width + 1)>> pick; // per k: slots (i, j) to the two
                                                                       // children; (0, 0): n as one slot
     build_buffer<std::uint8_t> open_left; // W(n): the slots its left child gets
 
     explicit optimal_collapse(std::span<bvh_node<S> const> n) : nodes(n) {
-        cost.resize(n.size());
         pick.resize(n.size());
         open_left.resize(n.size());
         if (!n.empty()) solve(0, 0);
@@ -59,22 +59,24 @@ struct optimal_collapse {
     // no order that would split the work into ranges: parallel builds allocate them as they go).
     static constexpr int parallel_levels = 6;
 
-    // F and W of x's subtree, children before their parent (post-order). Each node's values
-    // depend only on its children's: the result does not depend on the threads.
-    void solve(std::uint32_t x, int level) {
+    // F and W of x's subtree, children before their parent (post-order); returns F(x, ·). Each
+    // node's values depend only on its children's: the result does not depend on the threads.
+    costs solve(std::uint32_t x, int level) {
         auto const& node = nodes[x];
         if (node.is_leaf()) {
-            cost[x].fill(0.0);
             pick[x].fill(0);
             open_left[x] = 0;
-            return;
+            costs zero;
+            zero.fill(0.0);
+            return zero;
         }
         std::uint32_t const l = node.index, r = l + 1;
+        costs left, right;
         if (level < parallel_levels)
-            parallel_invoke([&] { solve(l, level + 1); }, [&] { solve(r, level + 1); });
+            parallel_invoke([&] { left = solve(l, level + 1); }, [&] { right = solve(r, level + 1); });
         else
-            solve(l, level + 1), solve(r, level + 1);
-        auto& f = cost[x];
+            left = solve(l, level + 1), right = solve(r, level + 1);
+        costs f;
         auto& p = pick[x];
         p.fill(0);
         // Opening x with k slots: the least F(l, i) + F(r, k − i), the first i that reaches it
@@ -86,7 +88,7 @@ struct optimal_collapse {
             opened[kk] = std::numeric_limits<double>::infinity();
             opened_left[kk] = 1;
             for (int i = 1; i < k; ++i) {
-                double const c = cost[l][std::size_t(i)] + cost[r][std::size_t(k - i)];
+                double const c = left[std::size_t(i)] + right[std::size_t(k - i)];
                 if (c < opened[kk]) opened[kk] = c, opened_left[kk] = std::uint8_t(i);
             }
         }
@@ -103,6 +105,7 @@ struct optimal_collapse {
             if (opened[kk] < f[kk])
                 f[kk] = opened[kk], p[2 * kk] = opened_left[kk], p[2 * kk + 1] = std::uint8_t(k - opened_left[kk]);
         }
+        return f;
     }
     // The slots that cover x's subtree with at most k of them, appended to slots[count…].
     void gather(std::uint32_t x, int k, std::uint32_t* slots, int& count) const {
