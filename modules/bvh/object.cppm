@@ -294,23 +294,12 @@ void object_side_bounds(bin_scratch<S> const& scratch, centroid_bins<S> const& b
         binning.side_bounds(scratch.bins.data(), best, left, right);
 }
 
-// Partitions refs[begin, end) in place by the bin boundary `best` found by object_split (or by
-// index when best.axis < 0: the centroids coincide), gathering the two sides' bounds and centroid
-// bounds on the way; returns where the right side starts.
-template <typename S>
-std::size_t partition_object(build_context<S>& ctx, bin_scratch<S> const& scratch, centroid_bins<S> const& binning,
-                             split_choice const& best, std::size_t begin, std::size_t end, range_bounds<S>& left,
-                             range_bounds<S>& right) {
-    if (best.axis < 0) {
-        std::size_t const mid = begin + (end - begin) / 2;
-        left = bounds_of(ctx, begin, mid);
-        right = bounds_of(ctx, mid, end);
-        return mid;
-    }
-    // Hoare's scheme: each reference is read once, and only misplaced pairs are swapped.
-    prim_ref<S>* const refs = ctx.refs.data();
-    int const axis = best.axis;
-    auto const goes_left = [&](vec3<S> const& c) { return binning.index(axis, c[axis]) < best.split; };
+// Partitions refs[begin, end) by Hoare's scheme, each reference read once and only misplaced
+// pairs swapped, gathering the two sides' centroid bounds (goes_left: the side of a doubled
+// centre); returns where the right side starts.
+template <typename S, typename GoesLeft>
+std::size_t partition_hoare(prim_ref<S>* refs, std::size_t begin, std::size_t end, GoesLeft const& goes_left,
+                            range_bounds<S>& left, range_bounds<S>& right) {
     std::size_t i = begin, j = end;
     for (;;) {
         vec3<S> ci, cj;
@@ -330,8 +319,102 @@ std::size_t partition_object(build_context<S>& ctx, bin_scratch<S> const& scratc
         ++i;
         --j;
     }
-    object_side_bounds(scratch, binning, best, left.bounds, right.bounds);
     return i;
+}
+
+// The same partition without a branch per reference (block partitioning: Edelkamp and Weiß 2016,
+// "BlockQuicksort: How branch mispredictions don't affect quicksort"). Near the root a
+// reference's side is a coin toss for the branch predictor; here blocks of partition_block
+// references at each end are classified first, the side of each computed in 4-lane vectors (the
+// bin index of bin_refs_vector, so the same side as centroid_bins::index) and its centroid added
+// to its side's bounds by selects, and the misplaced references of the two blocks are swapped
+// pairwise. A block stays until all its misplaced references are swapped, so that [begin, l) holds
+// only left references and [r, end) only right ones; partition_hoare finishes [l, r), fewer than
+// 2 · partition_block references (some seen twice: their centroids are added to the same side's
+// bounds again, which changes nothing). The two sides are the same sets as partition_hoare's, in
+// another order.
+inline constexpr std::size_t partition_block = 32;
+
+template <typename S, typename GoesLeft>
+    requires vector_binning<S>
+std::size_t partition_blocks(prim_ref<S>* refs, centroid_bins<S> const& binning, split_choice const& best,
+                             std::size_t begin, std::size_t end, GoesLeft const& goes_left, range_bounds<S>& left,
+                             range_bounds<S>& right) {
+    using simd::float4;
+    using simd::int4;
+    constexpr std::size_t B = partition_block;
+    float4 const lo = to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]));
+    float4 const scale = to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]));
+    float4 const last(float(binning.bins - 1));
+    int4 const split(std::int32_t(best.split));
+    int const axis = best.axis;
+    float const inf = std::numeric_limits<float>::infinity();
+    float4 left_lo(inf), left_hi(-inf), right_lo(inf), right_hi(-inf);
+    // 1 when ref goes left; its doubled centre joins that side's bounds (min and max with the
+    // bounds second: a NaN coordinate is ignored, as extend does).
+    auto const side = [&](prim_ref<S> const& ref) -> std::uint32_t {
+        float4 const c = float4::load(&ref.lo.x) + float4::load(&ref.hi.x);
+        float4 const f = simd::min(simd::max((c - lo) * scale, float4(0.0f)), last);
+        std::uint32_t const goes = (simd::movemask(simd::convert_to_int(f) < split) >> axis) & 1u;
+        auto const is_left = int4(std::int32_t(goes)) != int4(0);
+        left_lo = simd::min(simd::select(is_left, c, float4(inf)), left_lo);
+        left_hi = simd::max(simd::select(is_left, c, float4(-inf)), left_hi);
+        right_lo = simd::min(simd::select(is_left, float4(inf), c), right_lo);
+        right_hi = simd::max(simd::select(is_left, float4(-inf), c), right_hi);
+        return goes;
+    };
+    std::uint8_t misplaced_left[B], misplaced_right[B]; // offsets in the left and right blocks
+    std::size_t l = begin, r = end, count_l = 0, count_r = 0, first_l = 0, first_r = 0;
+    while (r - l >= 2 * B) {
+        if (count_l == 0) {
+            first_l = 0;
+            for (std::size_t k = 0; k < B; ++k) {
+                misplaced_left[count_l] = std::uint8_t(k);
+                count_l += 1u - side(refs[l + k]);
+            }
+        }
+        if (count_r == 0) {
+            first_r = 0;
+            for (std::size_t k = 0; k < B; ++k) {
+                misplaced_right[count_r] = std::uint8_t(k);
+                count_r += side(refs[r - 1 - k]);
+            }
+        }
+        std::size_t const swaps = std::min(count_l, count_r);
+        for (std::size_t k = 0; k < swaps; ++k)
+            std::swap(refs[l + misplaced_left[first_l + k]], refs[r - 1 - misplaced_right[first_r + k]]);
+        count_l -= swaps, first_l += swaps;
+        count_r -= swaps, first_r += swaps;
+        if (count_l == 0) l += B;
+        if (count_r == 0) r -= B;
+    }
+    left.centroids = extend(left.centroids, basic_aabb<S>{from_lanes(left_lo), from_lanes(left_hi)});
+    right.centroids = extend(right.centroids, basic_aabb<S>{from_lanes(right_lo), from_lanes(right_hi)});
+    return partition_hoare(refs, l, r, goes_left, left, right);
+}
+
+// Partitions refs[begin, end) in place by the bin boundary `best` found by object_split (or by
+// index when best.axis < 0: the centroids coincide), gathering the two sides' bounds and centroid
+// bounds on the way; returns where the right side starts.
+template <typename S>
+std::size_t partition_object(build_context<S>& ctx, bin_scratch<S> const& scratch, centroid_bins<S> const& binning,
+                             split_choice const& best, std::size_t begin, std::size_t end, range_bounds<S>& left,
+                             range_bounds<S>& right) {
+    if (best.axis < 0) {
+        std::size_t const mid = begin + (end - begin) / 2;
+        left = bounds_of(ctx, begin, mid);
+        right = bounds_of(ctx, mid, end);
+        return mid;
+    }
+    int const axis = best.axis;
+    auto const goes_left = [&](vec3<S> const& c) { return binning.index(axis, c[axis]) < best.split; };
+    std::size_t mid;
+    if constexpr (vector_binning<S>)
+        mid = partition_blocks(ctx.refs.data(), binning, best, begin, end, goes_left, left, right);
+    else
+        mid = partition_hoare(ctx.refs.data(), begin, end, goes_left, left, right);
+    object_side_bounds(scratch, binning, best, left.bounds, right.bounds);
+    return mid;
 }
 
 // Builds the subtree of refs[begin, end) into nodes[node_index]; `range` holds the bounds of
