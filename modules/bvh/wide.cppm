@@ -66,9 +66,7 @@ struct optimal_collapse {
         if (node.is_leaf()) {
             pick[x].fill(0);
             open_left[x] = 0;
-            costs zero;
-            zero.fill(0.0);
-            return zero;
+            return costs{}; // F(leaf, k) = 0: a leaf is one slot, and no wide node
         }
         std::uint32_t const l = node.index, r = l + 1;
         costs left, right;
