@@ -83,6 +83,26 @@ range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::s
     b.hi = simd::max(hi, b.hi);
 }
 
+// centroid_bins::index on the three axes at once (lane a: axis a; lane 3 unused), for a doubled
+// centre in 4 lanes: the same arithmetic as bin_index, lane by lane (NaN and values below the
+// range in bin 0, values above it in the last bin). The one mapping from centre to bin of the
+// vector binning (bin_refs_vector) and the vector partition (partition_blocks), so that a
+// reference is partitioned by the bin it was counted in.
+struct vector_bin_index {
+    template <typename S>
+    explicit vector_bin_index(centroid_bins<S> const& binning)
+        : lo(to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]))),
+          scale(to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]))),
+          last(float(binning.bins - 1)) {}
+
+    [[gnu::always_inline]] simd::int4 operator()(simd::float4 doubled_center) const {
+        // max(f, 0) takes 0 for NaN (the second operand), as bin_index does.
+        return simd::convert_to_int(simd::min(simd::max((doubled_center - lo) * scale, simd::float4(0.0f)), last));
+    }
+
+    simd::float4 lo, scale, last;
+};
+
 // The vector form of bin_refs below, into the 3 · binning.bins bins and counts given.
 template <typename S>
     requires vector_binning<S>
@@ -96,16 +116,12 @@ void bin_refs_vector(centroid_bins<S> const& binning, prim_ref<S> const* refs, s
         boxes[k] = {float4(inf), float4(-inf)};
         counts[k] = 0;
     }
-    float4 const lo = to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]));
-    float4 const scale = to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]));
-    float4 const last(float(binning.bins - 1));
+    vector_bin_index const bin_of(binning);
     int4 const first_of_axis = int4::iota() * int4(binning.bins);
     for (std::size_t i = begin; i < end; ++i) {
         float4 const box_lo = float4::load(&refs[i].lo.x), box_hi = float4::load(&refs[i].hi.x);
-        // max(f, 0) takes 0 for NaN (the second operand), as bin_index does.
-        float4 const f = simd::min(simd::max((box_lo + box_hi - lo) * scale, float4(0.0f)), last);
         alignas(16) std::int32_t slot[4];
-        (simd::convert_to_int(f) + first_of_axis).store_aligned(slot);
+        (bin_of(box_lo + box_hi) + first_of_axis).store_aligned(slot);
         for (int a = 0; a < 3; ++a) {
             grow_bin(boxes[std::size_t(slot[a])], box_lo, box_hi);
             ++counts[std::size_t(slot[a])];
@@ -343,9 +359,7 @@ std::size_t partition_blocks(prim_ref<S>* refs, centroid_bins<S> const& binning,
     using simd::float4;
     using simd::int4;
     constexpr std::size_t B = partition_block;
-    float4 const lo = to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]));
-    float4 const scale = to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]));
-    float4 const last(float(binning.bins - 1));
+    vector_bin_index const bin_of(binning);
     int4 const split(std::int32_t(best.split));
     int const axis = best.axis;
     float const inf = std::numeric_limits<float>::infinity();
@@ -354,8 +368,7 @@ std::size_t partition_blocks(prim_ref<S>* refs, centroid_bins<S> const& binning,
     // bounds second: a NaN coordinate is ignored, as extend does).
     auto const side = [&](prim_ref<S> const& ref) -> std::uint32_t {
         float4 const c = float4::load(&ref.lo.x) + float4::load(&ref.hi.x);
-        float4 const f = simd::min(simd::max((c - lo) * scale, float4(0.0f)), last);
-        std::uint32_t const goes = (simd::movemask(simd::convert_to_int(f) < split) >> axis) & 1u;
+        std::uint32_t const goes = (simd::movemask(bin_of(c) < split) >> axis) & 1u;
         auto const is_left = int4(std::int32_t(goes)) != int4(0);
         left_lo = simd::min(simd::select(is_left, c, float4(inf)), left_lo);
         left_hi = simd::max(simd::select(is_left, c, float4(-inf)), left_hi);
@@ -363,23 +376,23 @@ std::size_t partition_blocks(prim_ref<S>* refs, centroid_bins<S> const& binning,
         right_hi = simd::max(simd::select(is_left, float4(-inf), c), right_hi);
         return goes;
     };
+    // The offsets k (block[k * step]) of the block's references that belong on the other side
+    // (belongs_left: 1 for the left block, 0 for the right one), in misplaced[0, count); returns
+    // count.
+    auto const classify = [&](prim_ref<S> const* block, std::ptrdiff_t step, std::uint32_t belongs_left,
+                              std::uint8_t* misplaced) {
+        std::size_t count = 0;
+        for (std::size_t k = 0; k < B; ++k) {
+            misplaced[count] = std::uint8_t(k);
+            count += side(block[std::ptrdiff_t(k) * step]) ^ belongs_left;
+        }
+        return count;
+    };
     std::uint8_t misplaced_left[B], misplaced_right[B]; // offsets in the left and right blocks
     std::size_t l = begin, r = end, count_l = 0, count_r = 0, first_l = 0, first_r = 0;
     while (r - l >= 2 * B) {
-        if (count_l == 0) {
-            first_l = 0;
-            for (std::size_t k = 0; k < B; ++k) {
-                misplaced_left[count_l] = std::uint8_t(k);
-                count_l += 1u - side(refs[l + k]);
-            }
-        }
-        if (count_r == 0) {
-            first_r = 0;
-            for (std::size_t k = 0; k < B; ++k) {
-                misplaced_right[count_r] = std::uint8_t(k);
-                count_r += side(refs[r - 1 - k]);
-            }
-        }
+        if (count_l == 0) first_l = 0, count_l = classify(refs + l, 1, 1u, misplaced_left);
+        if (count_r == 0) first_r = 0, count_r = classify(refs + (r - 1), -1, 0u, misplaced_right);
         std::size_t const swaps = std::min(count_l, count_r);
         for (std::size_t k = 0; k < swaps; ++k)
             std::swap(refs[l + misplaced_left[first_l + k]], refs[r - 1 - misplaced_right[first_r + k]]);

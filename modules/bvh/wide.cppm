@@ -45,8 +45,10 @@ struct optimal_collapse {
     std::span<bvh_node<S> const> nodes;
     // Written for every node before they are read (solve), so left unzeroed (build_buffer). The
     // costs F are not kept: each node's are returned to its parent, the only reader.
-    build_buffer<std::array<std::uint8_t, 2 * (bvh_width + 1)>> pick; // per k: slots (i, j) to the two
-                                                                      // children; (0, 0): n as one slot
+    // Per inner node and per k = 2 … bvh_width, at [2 (k − 2)] and [2 (k − 2) + 1]: the slots (i, j)
+    // its F(n, k) gives its two children; (0, 0): n as one slot (as always for k = 1, not stored).
+    // Not written for leaves (gather never reads a leaf's).
+    build_buffer<std::array<std::uint8_t, 2 * (bvh_width - 1)>> pick;
     build_buffer<std::uint8_t> open_left; // W(n): the slots its left child gets
 
     explicit optimal_collapse(std::span<bvh_node<S> const> n) : nodes(n) {
@@ -64,7 +66,6 @@ struct optimal_collapse {
     costs solve(std::uint32_t x, int level) {
         auto const& node = nodes[x];
         if (node.is_leaf()) {
-            pick[x].fill(0);
             open_left[x] = 0;
             return costs{}; // F(leaf, k) = 0: a leaf is one slot, and no wide node
         }
@@ -75,8 +76,6 @@ struct optimal_collapse {
         else
             left = solve(l, level + 1), right = solve(r, level + 1);
         costs f;
-        auto& p = pick[x];
-        p.fill(0);
         // Opening x with k slots: the least F(l, i) + F(r, k − i), the first i that reaches it
         // (1 when no cost is finite: NaN or infinite boxes, a valid choice all the same).
         std::array<double, bvh_width + 1> opened;
@@ -96,20 +95,26 @@ struct optimal_collapse {
         double const area = double(surface_area(node.bounds));
         f[0] = std::numeric_limits<double>::infinity(); // never asked: every cover has a slot
         f[1] = (area == area ? area : std::numeric_limits<double>::infinity()) + opened[bvh_width];
+        // F(x, k) = min(F(x, k − 1), opened[k]): the picks of k − 1 unless opening x with k is cheaper.
+        auto& p = pick[x];
+        std::uint8_t i = 0, j = 0;
         for (int k = 2; k <= bvh_width; ++k) {
             auto const kk = std::size_t(k);
             f[kk] = f[kk - 1];
-            p[2 * kk] = p[2 * kk - 2], p[2 * kk + 1] = p[2 * kk - 1];
-            if (opened[kk] < f[kk])
-                f[kk] = opened[kk], p[2 * kk] = opened_left[kk], p[2 * kk + 1] = std::uint8_t(k - opened_left[kk]);
+            if (opened[kk] < f[kk]) f[kk] = opened[kk], i = opened_left[kk], j = std::uint8_t(k - opened_left[kk]);
+            p[2 * (kk - 2)] = i, p[2 * (kk - 2) + 1] = j;
         }
         return f;
     }
     // The slots that cover x's subtree with at most k of them, appended to slots[count…].
     void gather(std::uint32_t x, int k, std::uint32_t* slots, int& count) const {
+        if (nodes[x].is_leaf() || k == 1) {
+            slots[count++] = x;
+            return;
+        }
         auto const& p = pick[x];
-        int const i = p[2 * std::size_t(k)], j = p[2 * std::size_t(k) + 1];
-        if (nodes[x].is_leaf() || (i == 0 && j == 0)) {
+        int const i = p[2 * std::size_t(k - 2)], j = p[2 * std::size_t(k - 2) + 1];
+        if (i == 0 && j == 0) {
             slots[count++] = x;
             return;
         }
