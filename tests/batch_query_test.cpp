@@ -323,9 +323,14 @@ TEST_CASE("batches of 0, 1, 7, 9 and 1000 rays, and the decision per group of 8"
     group[3].direction.y = -0.2f; // another octant
     CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 0);
     group[3].direction.y = 0.2f;
-    group[5].origin.x += 1.0f; // origins 1 apart in a box of side ~18: beyond 1/64 of it
+    // Origins apart by just under, then just over, batch_origin_spread of the box's largest side.
+    auto const d = canopy::diagonal(s.mesh.bounds());
+    float const limit = std::max({d.x, d.y, d.z}) * canopy::batch_origin_spread;
+    group[5].origin.x += 0.95f * limit;
+    CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 1);
+    group[5].origin.x = group[0].origin.x + 1.05f * limit;
     CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 0);
-    group[5].origin.x -= 1.0f;
+    group[5].origin.x = group[0].origin.x;
     for (std::size_t k = 1; k < 8; ++k) group[k].tmin = quiet_nan; // one ray takes part: traced alone
     CHECK(canopy::closest_hit(group, &s.mesh, &s.mesh + 1, out).packets == 0);
     group[1].tmin = 0.0f; // two: a packet, the other lanes inactive
