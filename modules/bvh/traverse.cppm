@@ -109,7 +109,8 @@ template <typename T>
 using lanes_t = std::conditional_t<simd::simd_width_v<T> == 1, no_lanes, std::uint32_t>;
 
 // Hit children of a wide node: bit i of mask set when child i is hit, entry distance in tnear[i]
-// (for packets: the smallest over the lanes that hit it, and in lanes[i] those lanes).
+// (for packets: the smallest over the lanes that hit it, and in lanes[i] those lanes; tnear is
+// left unset by tests asked for no distances, see culls_by_lanes).
 template <typename S, typename L = no_lanes>
 struct child_hits {
     std::uint32_t mask = 0;
@@ -226,7 +227,7 @@ template <bool Fused>
 
 // Child boxes one at a time through test_box (hook or default). A packet's child is hit by the
 // lanes that reached the node (`lanes`) and hit its box: the others, as alone, never enter it.
-template <typename T, typename S, typename I>
+template <bool Distances, typename T, typename S, typename I>
 [[gnu::always_inline]] inline child_hits<S, lanes_t<T>> test_children_each(prepared_ray<T> const& ray,
                                                                           wide_bvh_node<S> const& node, I& isect,
                                                                           lanes_t<T> lanes) {
@@ -242,8 +243,9 @@ template <typename T, typename S, typename I>
             if (hit_lanes == 0) continue;
             h.mask |= 1u << i;
             h.lanes[std::size_t(i)] = hit_lanes;
-            h.tnear[std::size_t(i)] = simd::reduce_min(simd::select(simd::mask_type_t<T>::from_bits(hit_lanes), box.tnear,
-                                                                    T(std::numeric_limits<S>::infinity())));
+            if constexpr (Distances)
+                h.tnear[std::size_t(i)] = simd::reduce_min(
+                    simd::select(simd::mask_type_t<T>::from_bits(hit_lanes), box.tnear, T(std::numeric_limits<S>::infinity())));
         }
     }
     return h;
@@ -269,8 +271,10 @@ template <typename T, typename S, typename I, bool Fused = false>
 struct node_tester {
     node_tester(prepared_ray<T> const& r, I& i) : ray(r), isect(i) {}
 
+    // Distances: whether the hit children's entry distances are wanted (see culls_by_lanes).
+    template <bool Distances = true>
     child_hits<S, lanes_t<T>> test(wide_bvh_node<S> const& node, lanes_t<T> lanes) {
-        return test_children_each(ray, node, isect, lanes);
+        return test_children_each<Distances>(ray, node, isect, lanes);
     }
     S box_tmax() const { return box_test_tmax(widest_tmax(ray.tmax)); }
     void tmax_changed() {}
@@ -284,6 +288,7 @@ template <typename T, typename S, typename I, bool Fused>
 struct node_tester<T, S, I, Fused> {
     node_tester(prepared_ray<float> const& r, I&) : ray(r), box_ray(r) {}
 
+    template <bool = true> // scalar rays always take the distances
     [[gnu::always_inline]] child_hits<float> test(wide_bvh_node<float> const& node, no_lanes) const {
         return test_children_wide(box_ray, node);
     }
@@ -366,13 +371,14 @@ struct node_tester<T, S, I, true> {
     // misses by construction: every lane's inverse direction is finite and non-zero here,
     // canopy.geometry:box, slab_offsets), are missed by every lane, so the hits are those of
     // testing every slot. A hit child's entry distance, the smallest over the lanes that hit it,
-    // is reduced only for the children hit.
+    // is reduced only for the children hit, and only when Distances (see culls_by_lanes).
+    template <bool Distances = true>
     [[gnu::always_inline]] inline child_hits<float, std::uint32_t> test(wide_bvh_node<float> const& node,
                                                                         std::uint32_t lanes) const {
-        T const missed(std::numeric_limits<float>::infinity());
+        [[maybe_unused]] T const missed(std::numeric_limits<float>::infinity());
         auto const reached = simd::mask_type_t<T>::from_bits(lanes); // once per node, not per child
         child_hits<float, std::uint32_t> h;
-        std::array<T, bvh_width> entry; // per child: tnear in the lanes that hit it, +inf elsewhere
+        [[maybe_unused]] std::array<T, bvh_width> entry; // per child: tnear in the lanes that hit it, +inf elsewhere
         for (std::uint32_t candidates = frustum_candidates(node); candidates != 0; candidates &= candidates - 1) {
             int const i = std::countr_zero(candidates);
             auto const c = std::size_t(i);
@@ -388,11 +394,13 @@ struct node_tester<T, S, I, true> {
             std::uint32_t const hit_lanes = simd::movemask(hit);
             h.mask |= std::uint32_t(hit_lanes != 0) << i;
             h.lanes[c] = hit_lanes;
-            entry[c] = simd::select(hit, tnear, missed);
+            if constexpr (Distances) entry[c] = simd::select(hit, tnear, missed);
         }
-        for (std::uint32_t m = h.mask; m != 0; m &= m - 1) {
-            auto const c = std::size_t(std::countr_zero(m));
-            h.tnear[c] = simd::reduce_min(entry[c]);
+        if constexpr (Distances) {
+            for (std::uint32_t m = h.mask; m != 0; m &= m - 1) {
+                auto const c = std::size_t(std::countr_zero(m));
+                h.tnear[c] = simd::reduce_min(entry[c]);
+            }
         }
         return h;
     }
@@ -485,6 +493,20 @@ struct traversal_stack {
         return false;
     }
 
+    // Pops into `next` the most recent entry that some lane of `live` enters, with its lanes
+    // narrowed to those (culls_by_lanes); false when none is left.
+    [[gnu::always_inline]] inline bool pop_entered_by(L live, traversal_entry<S, L>& next) {
+        while (top != bottom) {
+            --top;
+            if (L const lanes = top->lanes & live) {
+                next = *top;
+                next.lanes = lanes;
+                return true;
+            }
+        }
+        return false;
+    }
+
     traversal_entry<S, L>* bottom;
     traversal_entry<S, L>* top; // one past the most recent entry
 };
@@ -497,13 +519,13 @@ struct traversal_stack {
 // Slot order makes any-hit traversal a depth-first walk in one fixed order, whichever children a
 // ray hits: a packet visits the leaves each of its lanes would visit alone in the same relative
 // order, so each lane finds the same first hit (canopy.query:batch).
-template <bool near_first, typename Prim, typename S, typename L>
+template <bool near_first, bool Distances, typename Prim, typename S, typename L>
 [[gnu::always_inline]] inline traversal_entry<S, L> order_children(bvh_storage<Prim> const& b,
                                                                    wide_bvh_node<S> const& node,
                                                                    child_hits<S, L> const& hits,
                                                                    traversal_stack<S, L>& stack) {
     auto const entry = [&](std::uint32_t i) {
-        traversal_entry<S, L> e{node.child[i], node.count[i], hits.tnear[i], {}};
+        traversal_entry<S, L> e{node.child[i], node.count[i], Distances ? hits.tnear[i] : S(0), {}};
         if constexpr (!std::is_same_v<L, no_lanes>) e.lanes = hits.lanes[i];
         prefetch_child(b, e.child, e.count);
         return e;
@@ -621,6 +643,19 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
         }
     };
     [[maybe_unused]] std::conditional_t<tally, occupancy, no_lanes> counts;
+    // Any-hit packets cull stacked children by their lanes, not by distance. A lane's tmax does not
+    // change in an any-hit query until the lane is finished (tmax −inf), so a child that a live lane
+    // entered is never beyond the widest tmax; children whose lanes have all finished are dropped
+    // (they would hit nothing), and the others are visited with their live lanes only. The entry
+    // distances are then not needed, and not computed. Every live lane meets the same leaves in
+    // the same order as before, so the results are unchanged.
+    constexpr bool culls_by_lanes = !std::is_same_v<L, no_lanes> && !Query::wants_near_first;
+    auto const pop = [&] {
+        if constexpr (culls_by_lanes)
+            return stack.pop_entered_by(simd::movemask(ray.tmin <= ray.tmax), current);
+        else
+            return stack.pop_nearer_than(nodes.box_tmax(), current);
+    };
     for (;;) {
         if constexpr (may_trace_lanes_alone<T, I, Prim, Query>) {
             if ((current.count == 0 || !stores_triangle_blocks_v<Prim>) &&
@@ -628,7 +663,7 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
                 counts.lanes_alone += std::uint32_t(std::popcount(current.lanes));
                 if (traverse_lanes_alone(ray, b, isect, query, current)) return true;
                 nodes.tmax_changed();
-                if (!stack.pop_nearer_than(nodes.box_tmax(), current)) return false;
+                if (!pop()) return false;
                 continue;
             }
         }
@@ -638,9 +673,9 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
                 ++counts.node_visits;
                 counts.node_lanes += std::uint32_t(std::popcount(current.lanes));
             }
-            auto const hits = nodes.test(node, current.lanes);
+            auto const hits = nodes.template test<!culls_by_lanes>(node, current.lanes);
             if (hits.mask != 0) {
-                current = order_children<Query::wants_near_first>(b, node, hits, stack);
+                current = order_children<Query::wants_near_first, !culls_by_lanes>(b, node, hits, stack);
                 continue;
             }
         } else if constexpr (std::is_same_v<L, no_lanes>) {
@@ -661,7 +696,7 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
             if (stop) return true;
             nodes.tmax_changed();
         }
-        if (!stack.pop_nearer_than(nodes.box_tmax(), current)) return false;
+        if (!pop()) return false;
     }
 }
 
