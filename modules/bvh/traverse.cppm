@@ -648,7 +648,9 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
     // entered is never beyond the widest tmax; children whose lanes have all finished are dropped
     // (they would hit nothing), and the others are visited with their live lanes only. The entry
     // distances are then not needed, and not computed. Every live lane meets the same leaves in
-    // the same order as before, so the results are unchanged.
+    // the same order as before, so the results are unchanged. (A query that is not near-first but
+    // lowers tmax would only lose the culling of far children: a lane is dropped only once
+    // tmin > tmax, when it can hit nothing.)
     constexpr bool culls_by_lanes = !std::is_same_v<L, no_lanes> && !Query::wants_near_first;
     auto const pop = [&] {
         if constexpr (culls_by_lanes)
