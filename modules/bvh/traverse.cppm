@@ -519,13 +519,15 @@ struct traversal_stack {
 // Slot order makes any-hit traversal a depth-first walk in one fixed order, whichever children a
 // ray hits: a packet visits the leaves each of its lanes would visit alone in the same relative
 // order, so each lane finds the same first hit (canopy.query:batch).
-template <bool near_first, bool Distances, typename Prim, typename S, typename L>
+template <bool near_first, typename Prim, typename S, typename L>
 [[gnu::always_inline]] inline traversal_entry<S, L> order_children(bvh_storage<Prim> const& b,
                                                                    wide_bvh_node<S> const& node,
                                                                    child_hits<S, L> const& hits,
                                                                    traversal_stack<S, L>& stack) {
+    // Any-hit packets' tests give no distances (culls_by_lanes in traverse_with).
+    constexpr bool distances = near_first || std::is_same_v<L, no_lanes>;
     auto const entry = [&](std::uint32_t i) {
-        traversal_entry<S, L> e{node.child[i], node.count[i], Distances ? hits.tnear[i] : S(0), {}};
+        traversal_entry<S, L> e{node.child[i], node.count[i], distances ? hits.tnear[i] : S(0), {}};
         if constexpr (!std::is_same_v<L, no_lanes>) e.lanes = hits.lanes[i];
         prefetch_child(b, e.child, e.count);
         return e;
@@ -677,7 +679,7 @@ template <typename Tester, typename T, typename Prim, typename I, typename Query
             }
             auto const hits = nodes.template test<!culls_by_lanes>(node, current.lanes);
             if (hits.mask != 0) {
-                current = order_children<Query::wants_near_first, !culls_by_lanes>(b, node, hits, stack);
+                current = order_children<Query::wants_near_first>(b, node, hits, stack);
                 continue;
             }
         } else if constexpr (std::is_same_v<L, no_lanes>) {

@@ -108,12 +108,8 @@ struct optimal_collapse {
     }
     // The slots that cover x's subtree with at most k of them, appended to slots[count…].
     void gather(std::uint32_t x, int k, std::uint32_t* slots, int& count) const {
-        if (nodes[x].is_leaf() || k == 1) {
-            slots[count++] = x;
-            return;
-        }
-        auto const& p = pick[x];
-        int const i = p[2 * std::size_t(k - 2)], j = p[2 * std::size_t(k - 2) + 1];
+        int i = 0, j = 0; // a leaf, and k = 1: x as one slot
+        if (!nodes[x].is_leaf() && k > 1) i = pick[x][2 * std::size_t(k - 2)], j = pick[x][2 * std::size_t(k - 2) + 1];
         if (i == 0 && j == 0) {
             slots[count++] = x;
             return;

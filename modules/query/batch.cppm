@@ -110,7 +110,7 @@ inline constexpr std::size_t batch_skip_groups = 15 * batch_probe_packets;
 // The largest origin spread of a packet, as a fraction of the largest side of the scene's bounds.
 // Measured on shadow rays to a point light from the hits of neighbouring pixels
 // (docs/performance.md, Run 22): against 1/64, 1/32 makes packets of most of the models' groups
-// (bunny 2,237 → 10,170 packets, 25 % less time per ray; engine 7 %; slivers 20 %) and costs the
+// (bunny 2,237 → 10,170 packets, 24 % less time per ray; engine 8 %; slivers 23 %) and costs the
 // 1.3M-triangle sphere 3–5 % (its packets pass the adaptive test but do not pay); 1/16 and 1/8
 // gain no more on the models and lose more on the sphere.
 inline constexpr float batch_origin_spread = 1.0f / 32.0f;
