@@ -401,11 +401,12 @@ TEST_CASE("packets down to one or two lanes continue as single rays with the sin
     check(s.nested.middle.bounds(), s.nested.level1.begin(), s.nested.level1.end());
 }
 
-TEST_CASE("adaptive packing traces each coherent group one way or the other, with the single rays' results") {
+TEST_CASE("adaptive packing keeps packets where their lanes stay together and traces single rays where they part") {
     // The same camera over a few large triangles (a packet's lanes reach the same nodes) and over
-    // 60,000 small ones (8 neighbouring rays part near the root). Which way the adaptive policy
-    // takes depends on the clock (its logic is tested with given times below); the results are the
-    // single rays' either way, and every coherent group is either a packet or unpacked.
+    // 60,000 small ones (8 neighbouring rays part near the root). The adaptive policy measures the
+    // packets' lanes per node visit and lanes gone on alone (canopy.bvh:traverse,
+    // packet_occupancy) and unpacks only the second; the results are the single rays' either way,
+    // and the choices the same on every run.
     using canopy::batch_packing;
     random_source rng(1408);
     auto const coarse_soup = triangle_soup(rng, 200, 8.0f, 4.0f);
@@ -414,15 +415,39 @@ TEST_CASE("adaptive packing traces each coherent group one way or the other, wit
     mesh_bvh const fine = canopy::build_binned_sah(fine_soup);
     auto const rays = camera_rays(coarse.bounds(), 64, 48);
 
-    auto check = [&](mesh_bvh const& b, auto const& isect, bool may_unpack) {
+    // Over every coherent group traced as a packet: the lanes per node visit, in eighths of a
+    // lane, and the lanes gone on alone per packet, in halves.
+    struct measure {
+        double occupancy_eighths, alone_halves;
+    };
+    auto measure_packets = [&](mesh_bvh const& b) {
+        std::vector<record> out(rays.size());
+        canopy::detail::packet_occupancy_tally = {};
+        auto const stats =
+            canopy::closest_hit(rays, &b, &b + 1, out, canopy::default_intersector{}, batch_packing::always);
+        auto const o = canopy::detail::packet_occupancy_tally;
+        REQUIRE(o.node_visits > 0);
+        REQUIRE(stats.packets > 0);
+        return measure{double(8 * o.node_lanes) / double(o.node_visits), double(2 * o.lanes_alone) / double(stats.packets)};
+    };
+    auto const paying = double(canopy::batch_paying_occupancy_eighths);
+    auto const alone_limit = double(canopy::batch_lanes_alone_halves);
+    auto const c = measure_packets(coarse);
+    CHECK(c.occupancy_eighths >= paying);
+    CHECK(c.alone_halves <= alone_limit);
+    auto const f = measure_packets(fine);
+    CHECK((f.occupancy_eighths < paying || f.alone_halves > alone_limit));
+
+    auto check = [&](mesh_bvh const& b, auto const& isect, bool expect_unpacked) {
         std::vector<record> single(rays.size());
         for (std::size_t i = 0; i < rays.size(); ++i) single[i] = canopy::closest_hit(rays[i], &b, &b + 1, isect);
-        std::vector<record> always(rays.size()), adaptive(rays.size());
+        std::vector<record> always(rays.size()), adaptive(rays.size()), again(rays.size());
         auto const s_always = canopy::closest_hit(rays, &b, &b + 1, always, isect, batch_packing::always);
         auto const s_adaptive = canopy::closest_hit(rays, &b, &b + 1, adaptive, isect);
+        auto const s_again = canopy::closest_hit(rays, &b, &b + 1, again, isect, batch_packing::adaptive);
         std::size_t mismatches = 0;
         for (std::size_t i = 0; i < rays.size(); ++i)
-            mismatches += !identical(always[i], single[i]) + !identical(adaptive[i], single[i]);
+            mismatches += !identical(always[i], single[i]) + !identical(adaptive[i], single[i]) + !identical(again[i], single[i]);
         CHECK(mismatches == 0);
         // Coherent groups: all but those whose rays change octant in the image's middle.
         std::size_t const coherent = s_always.packets * 8;
@@ -431,98 +456,18 @@ TEST_CASE("adaptive packing traces each coherent group one way or the other, wit
         CHECK(s_always.unpacked_rays == 0);
         CHECK(s_adaptive.packets * 8 + s_adaptive.unpacked_rays == coherent);
         CHECK(s_adaptive.single_rays == s_always.single_rays + s_adaptive.unpacked_rays);
-        if (may_unpack) {
-            // The first 2 × batch_probe_window coherent groups are timed, half of them each way.
-            CHECK(s_adaptive.packets >= canopy::batch_probe_window);
-            CHECK(s_adaptive.unpacked_rays >= 8 * canopy::batch_probe_window);
+        CHECK(s_again.packets == s_adaptive.packets);
+        CHECK(s_again.unpacked_rays == s_adaptive.unpacked_rays);
+        if (expect_unpacked) {
+            // The first window is packets; then mostly single rays, one window in 16 probing again.
+            CHECK(s_adaptive.packets >= canopy::batch_probe_packets);
+            CHECK(s_adaptive.unpacked_rays > coherent / 2);
         } else {
             CHECK(s_adaptive.unpacked_rays == 0);
         }
     };
-    check(coarse, canopy::default_intersector{}, true);
+    check(coarse, canopy::default_intersector{}, false);
     check(fine, canopy::default_intersector{}, true);
     // An intersector with a filter sees packets as documented, whatever they cost: never unpacked.
     check(fine, alpha_filter{}, false);
-}
-
-TEST_CASE("the adaptive policy times both ways, then takes the faster for the groups between probes") {
-    using canopy::batch_probe_every;
-    using canopy::batch_probe_window;
-    using policy = canopy::detail::packing_policy;
-    // Runs `groups` coherent groups through p, a packet taking packet_time and a single group
-    // single_time (the timed group number spike_at, counted over both ways, gets `spike` more).
-    struct run {
-        std::size_t packets = 0, timed = 0, timed_packets = 0;
-        std::string probes; // the ways of the timed groups: p or s
-    };
-    auto drive = [](policy& p, std::size_t groups, std::uint64_t packet_time, std::uint64_t single_time,
-                    std::size_t spike_at = ~std::size_t(0), std::uint64_t spike = 0) {
-        run r;
-        for (std::size_t g = 0; g < groups; ++g) {
-            auto const how = p.next();
-            r.packets += how.packet;
-            std::uint64_t t = how.packet ? packet_time : single_time;
-            if (how.timed) {
-                if (r.timed == spike_at) t += spike;
-                ++r.timed;
-                r.timed_packets += how.packet;
-                r.probes += how.packet ? 'p' : 's';
-            }
-            p.traced(how, t);
-        }
-        return r;
-    };
-    std::size_t const start = 2 * batch_probe_window; // groups all timed at the start
-    std::size_t const later = 20;                      // probes after the start, in the runs below
-    std::size_t const groups = start + later * batch_probe_every;
-
-    SECTION("packets faster: the start and one group in batch_probe_every timed, the others packets") {
-        policy p(true);
-        auto const r = drive(p, groups, 100, 150);
-        CHECK(r.timed == start + later);
-        CHECK(r.timed_packets == (start + later) / 2);
-        CHECK(r.packets == groups - (start + later) / 2);
-        CHECK(p.chose_packets());
-    }
-    SECTION("single rays faster: the untimed groups are traced ray by ray") {
-        policy p(true);
-        auto const r = drive(p, groups, 150, 100);
-        CHECK(r.timed == start + later);
-        CHECK(r.packets == r.timed_packets);
-        CHECK(!p.chose_packets());
-    }
-    SECTION("the probes alternate packet, single, single, packet, ...") {
-        policy p(true);
-        auto const r = drive(p, groups, 100, 100);
-        std::string expected;
-        for (std::size_t k = 0; k < r.timed; ++k) expected += ((k + 1) >> 1 & 1u) == 0 ? 'p' : 's';
-        CHECK(r.probes == expected);
-    }
-    SECTION("one slow group (an interruption) does not decide") {
-        // Packets 10 % faster, but one timed packet group (the fourth timed group) stalls for 40
-        // groups' worth; and the other way round.
-        policy p(true);
-        drive(p, start, 100, 110, 3, 4000);
-        CHECK(p.chose_packets());
-        policy q(true);
-        drive(q, start, 110, 100, 2, 4000);
-        CHECK(!q.chose_packets());
-    }
-    SECTION("a change of cost along the batch turns the choice within a window of probes") {
-        policy p(true);
-        drive(p, groups, 100, 150);
-        CHECK(p.chose_packets());
-        // Packets now cost twice as much: once most of each way's window holds the new times, the
-        // untimed groups go ray by ray.
-        drive(p, 2 * batch_probe_window * batch_probe_every, 300, 150);
-        CHECK(!p.chose_packets());
-        auto const r = drive(p, groups, 300, 150);
-        CHECK(r.packets == r.timed_packets);
-    }
-    SECTION("without adapting, every group is a packet and none is timed") {
-        policy p(false);
-        auto const r = drive(p, groups, 200, 100);
-        CHECK(r.packets == groups);
-        CHECK(r.timed == 0);
-    }
 }

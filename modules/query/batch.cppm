@@ -18,20 +18,23 @@
 // The test runs on the group packed as a packet (one load per ray and one 8 × 8 transposition),
 // in a few dozen vector instructions: far less than tracing the rays.
 //
-// Whether packets pay is then measured, not guessed (batch_packing::adaptive, the default), by
-// timing both ways on the rays at hand. On large meshes seen from afar the lanes of a packet part
-// early, and a packet costs more than its rays traced one by one (a packet tests one child box or
-// one triangle at a time against its lanes, a single ray eight boxes or eight triangles at once);
-// on models seen whole it costs a third less. Which side a set of rays falls on depends on the
-// scene, the rays and the machine (an earlier policy's thresholds on counts of lanes per node,
-// calibrated on one CPU, chose wrongly on another: docs/performance.md, Runs 22 and 23), so the
-// batch asks the clock. It times its first coherent groups both ways, alternately one as a packet
-// and one ray by ray, and from then on one coherent group in batch_probe_every (the two ways in
-// turn), and traces the other groups the way whose recent groups took less time (the mean of each
-// way's last batch_probe_window timed groups, the slowest left out, so that one interruption of
-// the thread does not decide). The timing decides only which way is taken: the results are the
-// same either way, but the batch_stats of two runs may differ. Intersectors that intercept anything (a hook or a filter)
-// see packets always (they are told so below), and so do batches with batch_packing::always.
+// Whether packets pay is then measured, not guessed (batch_packing::adaptive, the default). On
+// large meshes seen from afar the lanes of a packet part early, and a packet costs more than its
+// rays traced one by one (a packet tests one child box or one triangle at a time against its
+// lanes, a single ray eight boxes or eight triangles at once). Packets of an intersector that
+// intercepts nothing count, as they go, the lanes that reach each wide node they visit
+// (canopy.bvh:traverse, packet_occupancy), and the lanes that went on alone. After every
+// batch_probe_packets packets the batch looks at the window's means: fewer than
+// batch_paying_occupancy_eighths / 8 lanes per node visit, or more than
+// batch_lanes_alone_halves / 2 lanes gone on alone per packet, and the next batch_skip_groups
+// coherent groups are traced one ray at a time, then packets are probed again. The counts depend
+// only on the rays and the scene, never on timing: a batch makes the same choices on every run.
+// Measured on primary rays (canopy_bench_profile --batch --packets-always, docs/performance.md,
+// Run 13), packets that pay: CAD model and bunny 6.8–7.0 lanes per node visit and 0.1–0.2 lanes
+// alone per packet, slivers 5.9–7.0 and 0.3–0.5, 1.3M-triangle sphere 5.5–5.9 and 0.8–1.1, soup
+// 5.25–5.45 and 3.1–3.5; packets that lose: 2M terrain 5.0 and 2.1, the forest's instances
+// 6.2–6.3 and 5.9–6.1. Hence 41/8 (5.125) and 9/2 (4.5), between the two sides; the signal is
+// coarse, and batch_packing::always keeps every coherent group a packet.
 //
 // How a packet is traced (canopy.bvh:traverse): its node test takes one child box at a time
 // against all lanes; its leaf test one triangle at a time, read straight from the leaf's block,
@@ -68,7 +71,6 @@ module;
 #include <algorithm>
 #include <array>
 #include <bit>
-#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -96,97 +98,74 @@ struct batch_stats {
 // of this file).
 enum class batch_packing { adaptive, always };
 
-// The adaptive policy (see the top of this file): after the first 2 × batch_probe_window coherent
-// groups, all timed, one coherent group in batch_probe_every is timed, the probes alternating
-// between the two ways; each way is judged on its last batch_probe_window probes. An odd period
-// keeps the probes from falling on the same columns of an image row after row. Measured on the
-// seven benchmark scenes (docs/performance.md, Run 23).
-inline constexpr std::size_t batch_probe_window = 8;
-inline constexpr std::size_t batch_probe_every = 15;
+// The adaptive policy (see the top of this file): packets per measured window; the lanes per node
+// visit, in eighths, from which packets pay (41/8 = 5.125 of 8); the lanes gone on alone per
+// packet, in halves, beyond which they do not (9/2 = 4.5); the coherent groups traced one ray at
+// a time after a window that did not pay (then one window in 16 probes packets again).
+inline constexpr std::size_t batch_probe_packets = 16;
+inline constexpr std::uint64_t batch_paying_occupancy_eighths = 41;
+inline constexpr std::uint64_t batch_lanes_alone_halves = 9;
+inline constexpr std::size_t batch_skip_groups = 15 * batch_probe_packets;
 
 // The largest origin spread of a packet, as a fraction of the largest side of the scene's bounds.
 // Measured on shadow rays to a point light from the hits of neighbouring pixels
 // (docs/performance.md, Run 22): against 1/64, 1/32 makes packets of most of the models' groups
 // (bunny 2,237 → 10,170 packets, 24 % less time per ray; engine 8 %; slivers 23 %) and costs the
-// 1.3M-triangle sphere 3–5 % (its packets carry few lanes per leaf and do not pay); 1/16 and 1/8
+// 1.3M-triangle sphere 3–5 % (its packets pass the adaptive test but do not pay); 1/16 and 1/8
 // gain no more on the models and lose more on the sphere.
 inline constexpr float batch_origin_spread = 1.0f / 32.0f;
 
 } // namespace canopy
 
-export namespace canopy::detail {
-
-// The adaptive policy's state over one batch (see the top of this file). next() tells how to
-// trace the next coherent group, and whether to time it; traced() takes the group's time back
-// (in any unit, the same for every group; ignored for groups not timed). With adapts false every
-// coherent group is a packet and nothing is timed. (Member functions are declared inline: in a
-// named module they are not implicitly.)
-class packing_policy {
-public:
-    struct choice {
-        bool packet = true;
-        bool timed = false;
-    };
-
-    inline explicit packing_policy(bool adapts) : adapts_(adapts) {}
-
-    inline choice next() const {
-        if (!adapts_) return {true, false};
-        if (until_probe_ > 0) return {packets_, false};
-        // Probes in the order packet, single, single, packet, packet, single, ...
-        return {((probes_ + 1) >> 1 & 1u) == 0, true};
-    }
-
-    inline void traced(choice c, std::uint64_t time) {
-        if (!c.timed) {
-            if (until_probe_ > 0) --until_probe_;
-            return;
-        }
-        (c.packet ? packet_times_ : single_times_).add(time);
-        ++probes_;
-        // Every group is a probe until each way has a full window, then one group in
-        // batch_probe_every.
-        if (probes_ >= 2 * batch_probe_window) until_probe_ = batch_probe_every - 1;
-        if (packet_times_.count >= 2 && single_times_.count >= 2)
-            packets_ = packet_times_.trimmed_mean() <= single_times_.trimmed_mean();
-    }
-
-    // The way the untimed groups take now (packets until both ways have been timed twice).
-    inline bool chose_packets() const { return packets_; }
-
-private:
-    // The last batch_probe_window times of one way's probes; their mean without the slowest, so
-    // that one interruption of the thread does not decide.
-    struct window {
-        std::array<std::uint64_t, batch_probe_window> times{};
-        std::size_t count = 0, next = 0;
-        inline void add(std::uint64_t t) {
-            times[next] = t;
-            next = (next + 1) % batch_probe_window;
-            count = std::min(count + 1, batch_probe_window);
-        }
-        inline double trimmed_mean() const {
-            std::uint64_t sum = 0, slowest = 0;
-            for (std::size_t k = 0; k < count; ++k) {
-                sum += times[k];
-                slowest = std::max(slowest, times[k]);
-            }
-            return double(sum - slowest) / double(count - 1);
-        }
-    };
-
-    bool adapts_;
-    bool packets_ = true;
-    std::size_t probes_ = 0, until_probe_ = 0;
-    window packet_times_, single_times_;
-};
-
-} // namespace canopy::detail
-
 namespace canopy::detail {
 
 inline constexpr std::size_t batch_width = 8;
 using batch_packet = basic_ray<simd::float8>;
+
+// Whether the `packets` packets traced between two readings of packet_occupancy_tally paid: true
+// when they counted no node visit and no lane alone (a structure without wide nodes, or an
+// intersector whose packets do not count: they stay packets).
+inline bool packets_paid(packet_occupancy const& before, packet_occupancy const& after, std::uint64_t packets) {
+    std::uint64_t const visits = after.node_visits - before.node_visits;
+    std::uint64_t const lanes = after.node_lanes - before.node_lanes;
+    std::uint64_t const alone = after.lanes_alone - before.lanes_alone;
+    return 8 * lanes >= batch_paying_occupancy_eighths * visits && 2 * alone <= batch_lanes_alone_halves * packets;
+}
+
+// The adaptive policy's state over one batch (see the top of this file): a window of
+// batch_probe_packets packets, measured from packet_occupancy_tally, then batch_skip_groups
+// coherent groups traced one ray at a time when the window did not pay. With batch_packing::always
+// every coherent group is a packet.
+class packing_policy {
+public:
+    explicit packing_policy(batch_packing packing) : adaptive_(packing == batch_packing::adaptive) { open_window(); }
+
+    // Whether the next coherent group is traced as a packet (false while groups are skipped; the
+    // last skipped group opens a new window).
+    bool packs_next() {
+        if (skip_left_ == 0) return true;
+        if (--skip_left_ == 0) open_window();
+        return false;
+    }
+    // Called after each packet: a full window either opens the next or starts the skip.
+    void packet_traced() {
+        if (!adaptive_ || --probe_left_ != 0) return;
+        if (packets_paid(window_start_, packet_occupancy_tally, batch_probe_packets))
+            open_window();
+        else
+            skip_left_ = batch_skip_groups;
+    }
+
+private:
+    void open_window() {
+        probe_left_ = batch_probe_packets;
+        window_start_ = packet_occupancy_tally;
+    }
+
+    bool adaptive_;
+    std::size_t probe_left_ = 0, skip_left_ = 0;
+    packet_occupancy window_start_;
+};
 
 // Whether packets of I over a range of Elem make the same calls as single rays would: the packet
 // query compiles without mistakes, every hook and filter the single rays would call has a packet
@@ -208,21 +187,6 @@ constexpr bool batch_takes_packets() {
                (!box_hook_for<I, R1, aabb, vec3<float>> || box_hook_for<I, R8, aabb, vec3<simd::float8>>) &&
                (!filter_hook_for<I, R1> || filter_hook_for<I, R8>);
     }
-}
-
-// Whether the adaptive policy may trace coherent groups of I over a range of Elem ray by ray: the
-// intersector intercepts nothing (no primitive hook, box hook or filter, for scalar rays or
-// packets, plain or prepared), so that no call could tell the two ways apart.
-template <typename I, typename Elem>
-constexpr bool batch_adapts() {
-    using Leaf = leaf_primitive_t<Elem>;
-    auto const intercepts = []<typename R>(R*) {
-        return primitive_hook_for<I, R, Leaf> || box_hook_for<I, R, aabb, vec3<ray_value_t<R>>> ||
-               filter_hook_for<I, R>;
-    };
-    return !intercepts(static_cast<ray*>(nullptr)) && !intercepts(static_cast<batch_packet*>(nullptr)) &&
-           !intercepts(static_cast<prepared_ray<float>*>(nullptr)) &&
-           !intercepts(static_cast<prepared_ray<simd::float8>*>(nullptr));
 }
 
 // batch_origin_spread times the largest side of the bounds of [first, last); 0 when they are
@@ -277,10 +241,9 @@ inline void check_batch_sizes(std::size_t rays, std::size_t results) {
     if (results < rays) throw std::invalid_argument("canopy: a batch query needs one result per ray");
 }
 
-// The batch loop: groups of 8 coherent rays go to packet(index, packet ray) or ray by ray to
-// single(index), as the packing policy says (always packets with batch_packing::always, or for an
-// intersector that intercepts something); every other ray goes to single(index). packet is
-// generic, so that it is only instantiated where packets are traced.
+// The batch loop: groups of 8 coherent rays go to packet(index, packet ray) while packets pay
+// (always with batch_packing::always), every other ray to single(index). packet is generic, so
+// that it is only instantiated where packets are traced.
 template <typename I, typename It, typename Packet, typename Single>
 batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packing packing, Packet&& packet,
                       Single&& single) {
@@ -293,26 +256,19 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
     std::size_t i = 0;
     if constexpr (batch_takes_packets<I, Elem>()) {
         if (rays.size() >= batch_width) {
-            using clock = std::chrono::steady_clock;
             float const limit = batch_spread_limit(first, last);
-            packing_policy policy(packing == batch_packing::adaptive && batch_adapts<I, Elem>());
+            packing_policy policy(packing);
             for (; i + batch_width <= rays.size(); i += batch_width) {
                 auto const p = pack_group(rays.subspan(i, batch_width));
-                if (!coherent_group(p, limit)) {
-                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
-                    continue;
-                }
-                auto const how = policy.next();
-                auto const start = how.timed ? clock::now() : clock::time_point{};
-                if (how.packet) {
+                bool const coherent = coherent_group(p, limit);
+                if (coherent && policy.packs_next()) {
                     packet(i, p);
                     ++stats.packets;
+                    policy.packet_traced();
                 } else {
                     for (std::size_t k = i; k < i + batch_width; ++k) one(k);
-                    stats.unpacked_rays += batch_width;
+                    if (coherent) stats.unpacked_rays += batch_width;
                 }
-                auto const time = how.timed ? std::uint64_t((clock::now() - start).count()) : 0u;
-                policy.traced(how, time);
             }
         }
     }
