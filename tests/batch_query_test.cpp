@@ -459,8 +459,8 @@ TEST_CASE("adaptive packing keeps packets where their lanes stay together and tr
         CHECK(s_again.packets == s_adaptive.packets);
         CHECK(s_again.unpacked_rays == s_adaptive.unpacked_rays);
         if (expect_unpacked) {
-            // The first window is packets; then mostly single rays, one window in 16 probing again.
-            CHECK(s_adaptive.packets >= canopy::batch_probe_packets);
+            // The first window is packets; then mostly single rays, one group in 16 probing again.
+            CHECK(s_adaptive.packets >= canopy::batch_first_probe_packets);
             CHECK(s_adaptive.unpacked_rays > coherent / 2);
         } else {
             CHECK(s_adaptive.unpacked_rays == 0);

@@ -23,12 +23,13 @@
 // rays traced one by one (a packet tests one child box or one triangle at a time against its
 // lanes, a single ray eight boxes or eight triangles at once). Packets of an intersector that
 // intercepts nothing count, as they go, the lanes that reach each wide node they visit
-// (canopy.bvh:traverse, packet_occupancy), and the lanes that went on alone. After every
-// batch_probe_packets packets the batch looks at the window's means: fewer than
-// batch_paying_occupancy_eighths / 8 lanes per node visit, or more than
-// batch_lanes_alone_halves / 2 lanes gone on alone per packet, and the next batch_skip_groups
-// coherent groups are traced one ray at a time, then packets are probed again. The counts depend
-// only on the rays and the scene, never on timing: a batch makes the same choices on every run.
+// (canopy.bvh:traverse, packet_occupancy), and the lanes that went on alone. After the first
+// batch_first_probe_packets packets, and then after every batch_probe_packets packets, the batch
+// looks at the window's means: fewer than batch_paying_occupancy_eighths / 8 lanes per node visit,
+// or more than batch_lanes_alone_halves / 2 lanes gone on alone per packet, and the next
+// batch_skip_groups coherent groups are traced one ray at a time, then packets are probed again.
+// The counts depend only on the rays and the scene, never on timing: a batch makes the same
+// choices on every run.
 // Measured on primary rays (canopy_bench_profile --batch --packets-always, docs/performance.md,
 // Run 13), packets that pay: CAD model and bunny 6.8–7.0 lanes per node visit and 0.1–0.2 lanes
 // alone per packet, slivers 5.9–7.0 and 0.3–0.5, 1.3M-triangle sphere 5.5–5.9 and 0.8–1.1, soup
@@ -98,11 +99,14 @@ struct batch_stats {
 // of this file).
 enum class batch_packing { adaptive, always };
 
-// The adaptive policy (see the top of this file): packets per measured window; the lanes per node
+// The adaptive policy (see the top of this file): packets in a batch's first measured window (few,
+// so that short batches, such as a renderer's tiles of 32 groups, decide too) and in the later ones
+// (more: a window's means vary less, measured in docs/performance.md, Run 23); the lanes per node
 // visit, in eighths, from which packets pay (41/8 = 5.125 of 8); the lanes gone on alone per
 // packet, in halves, beyond which they do not (9/2 = 4.5); the coherent groups traced one ray at
-// a time after a window that did not pay (then one window in 16 probes packets again).
-inline constexpr std::size_t batch_probe_packets = 16;
+// a time after a window that did not pay (so one group in 16 is a probing packet there).
+inline constexpr std::size_t batch_first_probe_packets = 16;
+inline constexpr std::size_t batch_probe_packets = 64;
 inline constexpr std::uint64_t batch_paying_occupancy_eighths = 41;
 inline constexpr std::uint64_t batch_lanes_alone_halves = 9;
 inline constexpr std::size_t batch_skip_groups = 15 * batch_probe_packets;
@@ -133,37 +137,39 @@ inline bool packets_paid(packet_occupancy const& before, packet_occupancy const&
 }
 
 // The adaptive policy's state over one batch (see the top of this file): a window of
-// batch_probe_packets packets, measured from packet_occupancy_tally, then batch_skip_groups
-// coherent groups traced one ray at a time when the window did not pay. With batch_packing::always
-// every coherent group is a packet.
+// batch_first_probe_packets packets, then windows of batch_probe_packets, each measured from
+// packet_occupancy_tally; after a window that did not pay, batch_skip_groups coherent groups traced
+// one ray at a time. With batch_packing::always every coherent group is a packet.
 class packing_policy {
 public:
-    explicit packing_policy(batch_packing packing) : adaptive_(packing == batch_packing::adaptive) { open_window(); }
+    explicit packing_policy(batch_packing packing) : adaptive_(packing == batch_packing::adaptive) {
+        open_window(batch_first_probe_packets);
+    }
 
     // Whether the next coherent group is traced as a packet (false while groups are skipped; the
     // last skipped group opens a new window).
     bool packs_next() {
         if (skip_left_ == 0) return true;
-        if (--skip_left_ == 0) open_window();
+        if (--skip_left_ == 0) open_window(batch_probe_packets);
         return false;
     }
     // Called after each packet: a full window either opens the next or starts the skip.
     void packet_traced() {
         if (!adaptive_ || --probe_left_ != 0) return;
-        if (packets_paid(window_start_, packet_occupancy_tally, batch_probe_packets))
-            open_window();
+        if (packets_paid(window_start_, packet_occupancy_tally, window_packets_))
+            open_window(batch_probe_packets);
         else
             skip_left_ = batch_skip_groups;
     }
 
 private:
-    void open_window() {
-        probe_left_ = batch_probe_packets;
+    void open_window(std::size_t packets) {
+        probe_left_ = window_packets_ = packets;
         window_start_ = packet_occupancy_tally;
     }
 
     bool adaptive_;
-    std::size_t probe_left_ = 0, skip_left_ = 0;
+    std::size_t probe_left_ = 0, skip_left_ = 0, window_packets_ = 0;
     packet_occupancy window_start_;
 };
 
