@@ -140,21 +140,23 @@ inline bool packets_paid(packet_occupancy const& before, packet_occupancy const&
 // batch_first_probe_packets packets, then windows of batch_probe_packets, each measured from
 // packet_occupancy_tally; after a window that did not pay, batch_skip_groups coherent groups traced
 // one ray at a time. With batch_packing::always every coherent group is a packet.
+// (Member functions are declared inline: in a named module they are not implicitly, and importers
+// would call them once per group instead of inlining them.)
 class packing_policy {
 public:
-    explicit packing_policy(batch_packing packing) : adaptive_(packing == batch_packing::adaptive) {
+    inline explicit packing_policy(batch_packing packing) : adaptive_(packing == batch_packing::adaptive) {
         open_window(batch_first_probe_packets);
     }
 
     // Whether the next coherent group is traced as a packet (false while groups are skipped; the
     // last skipped group opens a new window).
-    bool packs_next() {
+    inline bool packs_next() {
         if (skip_left_ == 0) return true;
         if (--skip_left_ == 0) open_window(batch_probe_packets);
         return false;
     }
     // Called after each packet: a full window either opens the next or starts the skip.
-    void packet_traced() {
+    inline void packet_traced() {
         if (!adaptive_ || --probe_left_ != 0) return;
         if (packets_paid(window_start_, packet_occupancy_tally, window_packets_))
             open_window(batch_probe_packets);
@@ -163,7 +165,7 @@ public:
     }
 
 private:
-    void open_window(std::size_t packets) {
+    inline void open_window(std::size_t packets) {
         probe_left_ = window_packets_ = packets;
         window_start_ = packet_occupancy_tally;
     }
