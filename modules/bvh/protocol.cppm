@@ -220,7 +220,12 @@ template <typename Ray, typename I, typename Query>
         for (int lane = 0; lane < count; ++lane) {
             auto hr = intersect_lane(ray, block, lane);
             apply_filter(ray, hr, isect, query);
+            bool const some_hit = simd::any(hr.hit);
             if (query.report(hr, ray)) return true;
+            // Any hit: once every lane that reached the leaf has its hit (tmax −inf, as for the
+            // lanes that did not reach it), the block's other triangles would be tested for no lane.
+            if constexpr (!Query::wants_near_first)
+                if (some_hit && simd::none(ray.tmin <= ray.tmax)) return false;
         }
         return false;
     } else {
