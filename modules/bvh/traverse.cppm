@@ -187,28 +187,37 @@ struct wide_box_ray {
 };
 
 // All eight child boxes against one scalar float ray at once; lane by lane the arithmetic of
-// canopy.geometry:box (intersect_slabs_fused or intersect_slabs). The far distances are scaled
-// once, after their minimum: rounding is monotonic, so min(fl(a·s), fl(b·s)) = fl(min(a, b)·s)
+// canopy.geometry:box (intersect_slabs_fused or intersect_slabs), the same hits. The far distances
+// are scaled after their minimum: rounding is monotonic, so min(fl(a·s), fl(b·s)) = fl(min(a, b)·s)
 // exactly; NaN distances (a ray in a slab's boundary plane, subtraction form only) drop out of
 // max/min on the same side as in the per-box test.
 template <bool Fused>
 [[gnu::always_inline]] inline child_hits<float> test_children_wide(wide_box_ray<Fused> const& ray,
                                                                    wide_bvh_node<float> const& node) {
     using simd::float8;
-    float8 tnear = ray.tmin;
-    float8 tfar;
+    float8 tnear, tfar;
+    float8 const scale(box_far_scale<float>);
     if constexpr (Fused) {
-        // No NaN in this form (canopy.geometry:box, slab_offsets): the first far distance is the
-        // minimum so far, with no +inf to start from.
-        tfar = ray.template distance<false>(node, 0);
+        // No NaN in this form (canopy.geometry:box, slab_offsets), so max and min are associative
+        // and commutative bit for bit, and the scale distributes over min exactly (rounding is
+        // monotonic): the reductions are trees, two steps from the distances to tnear and three
+        // to tfar where chains took three and four. A node's test is on the path from one node
+        // to the next, so its depth is what a ray waits for at every visit.
+        float8 const n0 = ray.template distance<true>(node, 0), n1 = ray.template distance<true>(node, 1),
+                     n2 = ray.template distance<true>(node, 2);
+        float8 const f0 = ray.template distance<false>(node, 0), f1 = ray.template distance<false>(node, 1),
+                     f2 = ray.template distance<false>(node, 2);
+        tnear = simd::max(simd::max(n0, n1), simd::max(n2, ray.tmin));
+        tfar = simd::min(simd::min(f0, f1) * scale, simd::min(f2 * scale, ray.box_tmax8));
     } else {
+        tnear = ray.tmin;
         tfar = float8(std::numeric_limits<float>::infinity());
+        for (std::size_t a = 0; a < 3; ++a) {
+            tnear = simd::max(ray.template distance<true>(node, a), tnear);
+            tfar = simd::min(ray.template distance<false>(node, a), tfar);
+        }
+        tfar = simd::min(tfar * scale, ray.box_tmax8);
     }
-    for (std::size_t a = 0; a < 3; ++a) {
-        tnear = simd::max(ray.template distance<true>(node, a), tnear);
-        if (!Fused || a > 0) tfar = simd::min(ray.template distance<false>(node, a), tfar);
-    }
-    tfar = simd::min(tfar * float8(box_far_scale<float>), ray.box_tmax8);
     child_hits<float> h;
     if constexpr (Fused) {
         // Unused slots hold empty boxes, which the fused form misses by construction (finite,
