@@ -12,6 +12,9 @@
 //   slivers  77,264 thin triangles in one mesh: a disk fan (aspect 1e4), a needle fan (aspect
 //            ~1.6e6), a closed bicone spindle of 4,096 slivers and a closed thin cylinder (r 0.01)
 //
+// A scene may also list points inside its closed thin solids (`interior`, for the ray set of rays
+// from inside, canopy.bench_tracing): the slivers' spindle and cylinder. The other scenes list none.
+//
 // `quick` shrinks every generated scene about 16× (the files are loaded as they are). Files are
 // compiled by canopy.scene and flattened to world-space triangles (prim_id = running index), so
 // that both libraries trace the same single-level list; a missing or unreadable file gives a
@@ -41,6 +44,7 @@ struct bench_scene {
     std::vector<triangle> mesh;                     // the mesh (of every instance, when instanced)
     std::vector<affine_transform<float>> instances; // object→world per instance; empty: one level
     std::string skipped;                            // why the scene is absent (a missing file)
+    std::vector<vec3<float>> interior;              // points strictly inside closed thin solids (may be empty)
 };
 
 // The names make_bench_scene knows, in the order of the default run.
@@ -189,8 +193,27 @@ std::vector<triangle> make_slivers(int shrink) {
     return out;
 }
 
+// `count` points strictly inside make_slivers' closed solids, half in the spindle and half in the
+// cylinder: within 0.9 of each solid's length and of its radius there (the polygons' inscribed
+// radii are above 0.99 of it), uniform over the cross-section. From the raw mt19937 stream.
+std::vector<vec> sliver_interior(int shrink, int count) {
+    std::mt19937 rng(91);
+    auto const u01 = [&] { return float(rng() >> 8) * (1.0f / 16777216.0f); };
+    std::vector<vec> out;
+    for (int i = 0; i < count; ++i) {
+        bool const spindle = i % 2 == 0;
+        float const along = 0.9f * (2.0f * u01() - 1.0f); // in (-0.9, 0.9) of the half length
+        float const radius = spindle ? 0.05f / float(shrink) * (1.0f - std::fabs(along)) : 0.01f;
+        float const r = 0.9f * radius * std::sqrt(u01());
+        double const angle = two_pi * double(u01());
+        vec const across(0.0f, r * float(std::cos(angle)), r * float(std::sin(angle)));
+        out.push_back(spindle ? vec(along, 1.5f, 0.0f) + across : vec(1.5f * along, -1.5f, 0.0f) + across);
+    }
+    return out;
+}
+
 bench_scene loaded_scene(std::string name, std::filesystem::path const& file) {
-    bench_scene s{std::move(name), file.filename().string(), {}, {}, {}};
+    bench_scene s{std::move(name), file.filename().string(), {}, {}, {}, {}};
     std::error_code ec;
     if (!std::filesystem::exists(file, ec)) {
         s.skipped = file.string() + " not found";
@@ -259,28 +282,28 @@ std::vector<triangle> flatten(compiled_scene const& scene) {
 bench_scene make_bench_scene(std::string const& name, bool quick) {
     int const shrink = quick ? 16 : 1;
     if (name == "sphere")
-        return {name, "closed icosphere", make_icosphere(quick ? 6 : 8), {}, {}};
+        return {name, "closed icosphere", make_icosphere(quick ? 6 : 8), {}, {}, {}};
     if (name == "terrain") {
         // Quick: a quarter of the cells per side over the same landscape, scaled down 4×.
         int const n = quick ? 250 : 1000;
         float const cell = 1000.0f / float(n);
         auto height = [cell](float x, float y) { return terrain_height(cell * x, cell * y) / cell; };
-        return {name, "height field", make_grid(n, n, height), {}, {}};
+        return {name, "height field", make_grid(n, n, height), {}, {}, {}};
     }
     if (name == "soup") {
         aabb const cube{vec(-1, -1, -1), vec(1, 1, 1)};
         return {name, "random triangle soup", make_triangle_soup(std::size_t(500000 / shrink), 1234, cube, 0.02f), {},
-                {}};
+                {}, {}};
     }
     if (name == "forest") {
         // Quick: a quarter of the leaves and a quarter of the trees.
         return {name, "instanced trees", make_tree(quick ? 180 : 720, 42), forest_placements(quick ? 2500 : 10000, 43),
-                {}};
+                {}, {}};
     }
     if (name == "engine")
         return loaded_scene(name, "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb");
     if (name == "bunny") return loaded_scene(name, "/usr/share/glmark2/models/bunny.obj");
-    if (name == "slivers") return {name, "thin triangles", make_slivers(shrink), {}, {}};
+    if (name == "slivers") return {name, "thin triangles", make_slivers(shrink), {}, {}, sliver_interior(shrink, 16384)};
     throw std::invalid_argument("unknown scene '" + name + "'");
 }
 

@@ -1,11 +1,16 @@
 // canopy.bench_tracing — what the benchmark drivers share: a bench scene compiled as `canopy
 // trace` compiles a file of the bench formats (canopy.plugins.bench's layout, then compile() with
 // keep_single_instance: one mesh BVH, or a top-level BVH over instances of the mesh, inst_id = the
-// instance's index), one query on it, a counting intersector, and the three ray sets of a scene.
+// instance's index), one query on it, a counting intersector, and the ray sets of a scene.
 //
-//   primary  a 512 × 512 pinhole camera looking at the scene's box from outside
-//   random   origins uniform in the scene's box, directions from a normal distribution
-//   shadow   from every primary hit toward a light outside the box (tmin 1e-4, tmax 1: the light)
+//   primary   a 512 × 512 pinhole camera looking at the scene's box from outside
+//   random    origins uniform in the scene's box, directions from a normal distribution
+//   shadow    from every primary hit toward a light outside the box (tmin 1e-4, tmax 1: the light)
+//   vertices  16,384 rays from origins uniform in the scene's box through a vertex of the mesh (a
+//             random corner of a random triangle, placed by a random instance when instanced):
+//             where many triangles meet (a fan's apex), every one of their leaves is reached
+//   inside    from the scene's interior points (bench_scene::interior, inside closed thin solids:
+//             the slivers' spindle and cylinder) in random directions; empty for other scenes
 module;
 #include <cstddef>
 #include <cstdint>
@@ -137,8 +142,8 @@ struct ray_set {
     bool shadow = false; // traced with any-hit only
 };
 
-// The ray sets of the scene's bounding box.
-std::vector<ray_set> make_rays(canopy_scene const& s) {
+// The ray sets of the scene (`in`, compiled as `s`).
+std::vector<ray_set> make_rays(canopy_scene const& s, bench_scene const& in) {
     std::vector<ray_set> sets;
     aabb const box = s.scene.bounds();
     auto const c = center(box);
@@ -173,9 +178,31 @@ std::vector<ray_set> make_rays(canopy_scene const& s) {
         vec3<float> const p = r.origin + r.direction * hit.t;
         shadow.rays.push_back({p, 1e-4f, light - p, 1.0f});
     }
+    // From the raw stream (the standard distributions differ between standard libraries).
+    auto const index = [&](std::size_t n) { return std::size_t(rng() % n); };
+    auto const in_box = [&] {
+        auto const u = [&] { return float(rng() >> 8) * (1.0f / 16777216.0f); };
+        return vec3<float>(box.min.x + d.x * u(), box.min.y + d.y * u(), box.min.z + d.z * u());
+    };
+    ray_set vertices{"vertices", {}, false};
+    if (!in.mesh.empty()) {
+        for (int k = 0; k < 16384; ++k) {
+            triangle const& t = in.mesh[index(in.mesh.size())];
+            vec3<float> v = k % 3 == 0 ? t.v0 : (k % 3 == 1 ? t.v1 : t.v2);
+            if (!in.instances.empty()) v = transform_point(in.instances[index(in.instances.size())], v);
+            vec3<float> const o = in_box();
+            if (o.x == v.x && o.y == v.y && o.z == v.z) continue;
+            vertices.rays.push_back({o, 0.0f, v - o, std::numeric_limits<float>::infinity()});
+        }
+    }
+    ray_set inside{"inside", {}, false};
+    for (vec3<float> const& o : in.interior)
+        inside.rays.push_back({o, 0.0f, {n01(rng), n01(rng), n01(rng)}, std::numeric_limits<float>::infinity()});
     sets.push_back(std::move(primary));
     sets.push_back(std::move(random));
     sets.push_back(std::move(shadow));
+    sets.push_back(std::move(vertices));
+    sets.push_back(std::move(inside));
     return sets;
 }
 

@@ -2,7 +2,7 @@
 //
 //   canopy_bench_embree [--scenes sphere,terrain,soup,forest,engine,bunny,slivers]
 //                       [--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2]
-//                       [--rays primary,random,shadow] [--quality automatic|fast|high] [--coherent]
+//                       [--rays primary,random,shadow,vertices,inside] [--quality automatic|fast|high] [--coherent]
 //
 // Scenes (canopy.bench_scenes, bench/bench_scenes.cppm): a 1.3M-triangle icosphere, a 2M-triangle
 // terrain, a 500k triangle soup, a forest of 10,000 instances of a 51k-triangle tree, two real
@@ -12,7 +12,9 @@
 // loaded by the bench plugin and compiled as `canopy trace` compiles it.
 //
 // Rays per scene: primary (a 512 × 512 pinhole camera), random (origins in the scene's box,
-// random directions) and shadow (from the primary hits toward a light; any hit only). Each set is
+// random directions) and shadow (from the primary hits toward a light; any hit only); on request
+// (--rays), vertices (16,384 rays through mesh vertices, where fans of slivers meet) and inside
+// (from inside the slivers' closed spindle and cylinder). Each set is
 // traced closest hit and any hit, with every Canopy intersector of `intersector_variants` below:
 // none, and the alpha rule of the bench formats (Embree: an intersection filter function).
 //
@@ -577,7 +579,7 @@ void run_scene(bench_scene const& in, settings const& opt) {
             double const triangles = double(in.mesh.size());
             print_row("–", "memory (bytes/triangle stored)", {double(cs->bytes) / triangles, double(cs->bytes) / triangles},
                       {double(embree_memory) / triangles, double(embree_memory) / triangles}, 1);
-            sets = make_rays(*cs);
+            sets = make_rays(*cs, in);
         }
         print_row(fmt::format("{}", threads), "build (ms; ratio > 1: Canopy slower)", summarize(builds.canopy, false),
                   summarize(builds.embree, false), 1);
@@ -633,7 +635,7 @@ std::optional<settings> parse_command_line(int argc, char** argv) {
         }
     }
     for (auto const& r : opt.ray_sets)
-        if (!is_one_of(r, {"primary", "random", "shadow"})) return std::nullopt;
+        if (!is_one_of(r, {"primary", "random", "shadow", "vertices", "inside"})) return std::nullopt;
     for (auto const& s : opt.scenes)
         if (!is_one_of(s, canopy::bench::bench_scene_names())) return std::nullopt;
     if (opt.threads.empty()) return std::nullopt;
@@ -648,7 +650,7 @@ bench_scene load_scene_file(std::filesystem::path const& p) {
     canopy::scene graph;
     bench.load(graph, p, graph.root(), "bench");
     canopy::compiled_scene const c = canopy::compile(graph, {.name = p.string(), .keep_single_instance = true});
-    bench_scene out{p.filename().string(), "file", c.meshes[0].triangles, {}, {}};
+    bench_scene out{p.filename().string(), "file", c.meshes[0].triangles, {}, {}, {}};
     for (canopy::placement const& placed : c.top_meshes) out.instances.push_back(placed.transform);
     return out;
 }
@@ -688,7 +690,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr,
                      "usage: %s [--scenes sphere,terrain,soup,forest,engine,bunny,slivers] "
                      "[--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2] "
-                     "[--rays primary,random,shadow] [--quality automatic|fast|high] [--coherent]\n",
+                     "[--rays primary,random,shadow,vertices,inside] [--quality automatic|fast|high] [--coherent]\n",
                      argv[0]);
         return 2;
     }

@@ -6,7 +6,7 @@
 //                        [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L]
 //                        [--batch [--packets-always]] [--compare-packing]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
-//   RAYS   primary | random | shadow        QUERY  closest | any
+//   RAYS   primary | random | shadow | vertices | inside (canopy.bench_tracing)        QUERY  closest | any
 //
 // Traces N rays of the set from its I-th (default: all, from the first) P times (default 1) inside trace_rays, the
 // only function a profiler needs to look at, then prints the ray count, hits, nanoseconds per ray
@@ -59,7 +59,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow closest|any [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow|vertices|inside closest|any [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]\n",
                  program);
     return 2;
 }
@@ -187,7 +187,7 @@ int main(int argc, char** argv) {
                 mesh.quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,
                 st.leaf_count, double(references) / double(st.leaf_count), st.wide_node_count,
                 mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive, build_ms);
-    auto sets = make_rays(*s);
+    auto sets = make_rays(*s, scene);
     for (auto& set : sets) {
         if (set.name != set_name) continue;
         // --from I: the set from its I-th ray (e.g. the middle rows of the camera, where primary rays

@@ -199,6 +199,66 @@ TEST_CASE("equal t: the smaller prim_id wins, and multi_hit lists duplicates in 
     require_agreement(agreement, 500);
 }
 
+// Drops the candidates whose prim_id is a multiple of 3 (a filter: it sees the library's candidates).
+struct every_third_dropped : canopy::basic_intersector<every_third_dropped> {
+    template <typename Ray>
+    bool filter(Ray const&, canopy::basic_hit_record<float> const& hr) const {
+        return hr.prim_id % 3 != 0;
+    }
+};
+
+TEST_CASE("rays through a vertex where a fan of triangles meets: the first in (t, prim_id) order, with and without a filter") {
+    // Three fans of 64 triangles around the vertices c (a disk in a plane, a cone, a flat fan with
+    // every triangle given twice: exact ties), in shuffled order, so that the tied lanes of a block
+    // are not in id order. Rays from random origins through c: every triangle of the fan is a candidate at
+    // nearly or exactly the same t, and the closest hit is the first of them in (t, prim_id) order.
+    random_source rng(111);
+    std::vector<triangle> fans;
+    auto const add = [&](vec3<float> a, vec3<float> b, vec3<float> c) {
+        fans.push_back({a, b, c, std::uint32_t(fans.size()), 0});
+    };
+    std::vector<vec3<float>> const centres{{0.0f, 0.0f, 0.0f}, {3.0f, 1.0f, -2.0f}, {-2.5f, 0.5f, 1.5f}};
+    for (int fan = 0; fan < 3; ++fan) {
+        vec3<float> const c = centres[std::size_t(fan)];
+        for (int i = 0; i < 64; ++i) {
+            auto const rim = [&](int k) {
+                double const angle = 2.0 * 3.14159265358979 * double(k % 64) / 64.0;
+                float const height = fan == 1 ? 0.75f : 0.0f; // the cone's rim below its apex
+                return c + vec3<float>(float(std::cos(angle)), -height, float(std::sin(angle)));
+            };
+            add(c, rim(i), rim(i + 1));
+            if (fan == 2) add(rim(i + 1), c, rim(i)); // the same triangle again, its corners rotated
+        }
+    }
+    // Shuffled, then numbered as the builder numbers them (prim_id = input index).
+    std::shuffle(fans.begin(), fans.end(), std::mt19937(5));
+    for (std::uint32_t i = 0; i < fans.size(); ++i) fans[i].prim_id = i;
+    auto const dropped_test = [](ray const& r, triangle const& tri) {
+        auto hr = canopy::intersect(r, tri);
+        if (hr.hit) hr.hit = tri.prim_id % 3 != 0;
+        return hr;
+    };
+    for (canopy::bvh_build_options const options :
+         {canopy::bvh_build_options{}, canopy::bvh_build_options{.quality = canopy::build_quality::high}}) {
+        mesh_bvh const b = canopy::build_binned_sah(fans, options);
+        query_agreement plain, filtered;
+        int crowded = 0; // rays with 8 or more candidates within 1e-5 relative of the nearest t
+        for (int k = 0; k < 600; ++k) {
+            vec3<float> const c = centres[std::size_t(k % 3)];
+            vec3<float> const o = c + rng.point(-4.0f, 4.0f);
+            ray const r = make_ray(o, c - o);
+            auto const expected = brute_force_hits(r, fans, library_test);
+            crowded += expected.size() >= 8 && expected[7].t <= expected[0].t * 1.00001f;
+            compare_queries(r, &b, &b + 1, expected, [] { return canopy::default_intersector{}; }, plain);
+            compare_queries(r, &b, &b + 1, brute_force_hits(r, fans, dropped_test),
+                            [] { return every_third_dropped{}; }, filtered);
+        }
+        CHECK(crowded > 100);
+        require_agreement(plain, 300);
+        require_agreement(filtered, 300);
+    }
+}
+
 TEST_CASE("an alpha-mask intersector gives the brute-force results with the same rule") {
     random_source rng(104);
     auto const soup = triangle_soup(rng, 2000, 8.0f, 1.5f);

@@ -185,6 +185,17 @@ template <typename Ray, typename I, typename Query>
     }
 }
 
+// Whether a hit collector keeps one hit, the first in the order of (t, instance path, prim_id),
+// accepting a candidate only when it precedes that hit (canopy.query's closest hit says so with
+// `static constexpr bool keeps_nearest_only = true;`; collectors that do not say are not assumed to).
+template <typename Query>
+inline constexpr bool keeps_nearest_only = [] {
+    if constexpr (requires { Query::keeps_nearest_only; })
+        return bool(Query::keeps_nearest_only);
+    else
+        return false;
+}();
+
 // The one place that tells leaf primitives from nested structures. Query is a hit_collector
 // (above). Nested structures are traversed by their own `traverse(ray, structure, isect, query)`
 // (found by ADL), which comes back here for their primitives. Returns true when the query is
@@ -207,7 +218,8 @@ template <typename Ray, typename Prim, typename I, typename Query>
 // from the block and never tested) and the hit lanes go to the filter and the query: in lane
 // order for queries that stop at any hit (the first hit in leaf order, as one at a time would
 // find), by increasing (t, prim_id) otherwise, each while its t is still within the ray's
-// tightening tmax.
+// tightening tmax, and for a collector that keeps only the nearest hit up to the first that the
+// filter keeps.
 template <typename Ray, typename I, typename Query>
 [[gnu::always_inline]] inline bool call_hooks_or_descend(Ray& ray, triangle_block const& block, int count, I& isect,
                                                          Query& query) {
@@ -244,6 +256,12 @@ template <typename Ray, typename I, typename Query>
             mask &= ~(1u << lane);
             auto hr = hits.record(block, lane);
             apply_filter(ray, hr, isect, query);
+            // A collector that keeps only the nearest hit cannot accept a later lane once one has
+            // passed the filter: the later ones follow it in (t, prim_id) order, under the same
+            // instance path. Where many triangles meet at a vertex the ray passes through, every
+            // lane of a block may be a candidate at nearly the same t.
+            if constexpr (keeps_nearest_only<Query>)
+                if (hr.hit) return query.report(hr, ray);
             if (query.report(hr, ray)) return true;
         }
         return false;

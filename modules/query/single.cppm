@@ -59,6 +59,7 @@ auto precedes(basic_hit_record<T> const& a, basic_hit_record<T> const& b) {
 template <typename T>
 struct closest_query : instance_path {
     static constexpr bool wants_near_first = true;
+    static constexpr bool keeps_nearest_only = true; // report accepts only what precedes `best`
     basic_hit_record<T> best;
 
     template <typename Ray>
