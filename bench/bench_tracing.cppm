@@ -7,7 +7,7 @@
 //   random    origins uniform in the scene's box, directions from a normal distribution
 //   shadow    from every primary hit toward a light outside the box (tmin 1e-4, tmax 1: the light)
 //   vertices  16,384 rays from origins uniform in the scene's box through a vertex of the mesh (a
-//             random corner of a random triangle, placed by a random instance when instanced):
+//             random triangle's corner k mod 3 for the k-th ray, placed by a random instance when instanced):
 //             where many triangles meet (a fan's apex), every one of their leaves is reached
 //   inside    from the scene's interior points (bench_scene::interior, inside closed thin solids:
 //             the slivers' spindle and cylinder) in random directions; empty for other scenes
