@@ -18,6 +18,11 @@ TARGETS = [
     ("primary closest + alpha (Mrays/s)", "alpha rule (filter), primary closest", 1.5, True),
     ("shadow any + alpha (Mrays/s)", "alpha rule (filter), shadow any", 1.5, True),
     ("primary closest + alpha (triangle hook) (Mrays/s)", "alpha rule (triangle hook), primary closest", None, True),
+    # On request (--rays vertices,inside); rows of sets not traced are left out.
+    ("vertices closest (Mrays/s)", "closest hit, rays through vertices", 1.0, True),
+    ("vertices any (Mrays/s)", "any hit, rays through vertices", 1.0, True),
+    ("inside closest (Mrays/s)", "closest hit, rays from inside thin solids", 1.0, True),
+    ("inside any (Mrays/s)", "any hit, rays from inside thin solids", 1.0, True),
     ("memory (bytes/triangle stored)", "memory per triangle", 1.0, False),
     ("build (ms; ratio > 1: Canopy slower)", "build time", 1.0, False),
 ]
@@ -63,6 +68,8 @@ def main():
                 met = all((g >= goal) if larger else (g <= goal) for g in got)
                 text = text if met else f"**{text}**"
             cells.append(text)
+        if all(c == "–" for c in cells):
+            continue
         goal_text = "–" if goal is None else (f"≥ {goal}" if larger else f"≤ {goal}")
         print(f"| {label} | {goal_text} | " + " | ".join(cells) + " |")
 
