@@ -182,32 +182,51 @@ void add_spindle(std::vector<triangle>& out, vec center, float half_length, floa
     }
 }
 
+// The slivers' two closed solids, for make_slivers and sliver_interior: a spindle along x and a
+// thin cylinder along x. In quick mode the spindle has fewer slivers, its radius shrunk alike so
+// that each keeps its aspect.
+struct sliver_solids {
+    explicit sliver_solids(int shrink) : spindle_radius(0.05f / float(shrink)) {}
+    vec spindle_center{0, 1.5f, 0};
+    float spindle_half_length = 1.0f;
+    float spindle_radius;
+    vec cylinder_start{-1.5f, -1.5f, 0}, cylinder_end{1.5f, -1.5f, 0};
+    float cylinder_radius = 0.01f;
+};
+
 std::vector<triangle> make_slivers(int shrink) {
     std::vector<triangle> out;
     int const disk_full = 62832; // 2π · 1e4: aspect 1e4
     add_disk_fan(out, vec(0, 0, 0), 1.0f, disk_full / shrink, disk_full);
     add_needle_fan(out, vec(3.5f, 0, 0), 2.0f, 1.6e6, 4096 / shrink);
-    // Fewer slivers in quick mode, with the radius shrunk alike so each keeps its aspect.
-    add_spindle(out, vec(0, 1.5f, 0), 1.0f, 0.05f / float(shrink), 2048 / shrink);
-    add_cylinder(out, vec(-1.5f, -1.5f, 0), vec(1.5f, -1.5f, 0), 0.01f, 0.01f, 48, 64 / shrink);
+    sliver_solids const solids(shrink);
+    add_spindle(out, solids.spindle_center, solids.spindle_half_length, solids.spindle_radius, 2048 / shrink);
+    add_cylinder(out, solids.cylinder_start, solids.cylinder_end, solids.cylinder_radius, solids.cylinder_radius, 48,
+                 64 / shrink);
     return out;
 }
 
-// `count` points strictly inside make_slivers' closed solids, half in the spindle and half in the
-// cylinder: within 0.9 of each solid's length and of its radius there (the polygons' inscribed
-// radii are above 0.99 of it), uniform over the cross-section. From the raw mt19937 stream.
+// `count` points strictly inside make_slivers' closed solids (sliver_solids), half in the spindle
+// and half in the cylinder: within 0.9 of each solid's length and of its radius there (the
+// polygons' inscribed radii are above 0.99 of it), uniform over the cross-section. From the raw
+// mt19937 stream. Both solids lie along x, so the cross-section is in y and z.
 std::vector<vec> sliver_interior(int shrink, int count) {
+    sliver_solids const solids(shrink);
     std::mt19937 rng(91);
     auto const u01 = [&] { return float(rng() >> 8) * (1.0f / 16777216.0f); };
     std::vector<vec> out;
     for (int i = 0; i < count; ++i) {
         bool const spindle = i % 2 == 0;
         float const along = 0.9f * (2.0f * u01() - 1.0f); // in (-0.9, 0.9) of the half length
-        float const radius = spindle ? 0.05f / float(shrink) * (1.0f - std::fabs(along)) : 0.01f;
+        float const radius =
+            spindle ? solids.spindle_radius * (1.0f - std::fabs(along)) : solids.cylinder_radius;
         float const r = 0.9f * radius * std::sqrt(u01());
         double const angle = two_pi * double(u01());
         vec const across(0.0f, r * float(std::cos(angle)), r * float(std::sin(angle)));
-        out.push_back(spindle ? vec(along, 1.5f, 0.0f) + across : vec(1.5f * along, -1.5f, 0.0f) + across);
+        vec const axis_point = spindle ? solids.spindle_center + vec(solids.spindle_half_length * along, 0.0f, 0.0f)
+                                       : (solids.cylinder_start + solids.cylinder_end) * 0.5f +
+                                             vec(0.5f * (solids.cylinder_end.x - solids.cylinder_start.x) * along, 0.0f, 0.0f);
+        out.push_back(axis_point + across);
     }
     return out;
 }

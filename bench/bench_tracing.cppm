@@ -178,7 +178,8 @@ std::vector<ray_set> make_rays(canopy_scene const& s, bench_scene const& in) {
         vec3<float> const p = r.origin + r.direction * hit.t;
         shadow.rays.push_back({p, 1e-4f, light - p, 1.0f});
     }
-    // From the raw stream (the standard distributions differ between standard libraries).
+    // The vertex rays' indices and origins from the raw stream; the inside rays' directions as the
+    // random set's.
     auto const index = [&](std::size_t n) { return std::size_t(rng() % n); };
     auto const in_box = [&] {
         auto const u = [&] { return float(rng() >> 8) * (1.0f / 16777216.0f); };
