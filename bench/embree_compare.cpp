@@ -427,8 +427,9 @@ struct traced_scene {
 // Work counts per figure: the same at every thread count, so counted once.
 using work_cache = std::map<std::string, work_counts>;
 
+// Out of line, so that bench/callgrind_embree.sh can dump its counts figure by figure.
 template <typename Variant>
-void measure_figure(traced_scene const& s, ray_set const& set, bool closest, Variant const& variant,
+[[gnu::noinline]] void measure_figure(traced_scene const& s, ray_set const& set, bool closest, Variant const& variant,
                     work_cache& work) {
     using isect_type = typename Variant::type;
     std::string const figure = fmt::format("{} {}{}", set.name, closest ? "closest" : "any", variant.suffix);
