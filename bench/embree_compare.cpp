@@ -429,8 +429,8 @@ using work_cache = std::map<std::string, work_counts>;
 
 // Out of line, so that bench/callgrind_embree.sh can dump its counts figure by figure.
 template <typename Variant>
-[[gnu::noinline]] void measure_figure(traced_scene const& s, ray_set const& set, bool closest, Variant const& variant,
-                    work_cache& work) {
+[[gnu::noinline]] void measure_figure(traced_scene const& s, ray_set const& set, bool closest,
+                                      Variant const& variant, work_cache& work) {
     using isect_type = typename Variant::type;
     std::string const figure = fmt::format("{} {}{}", set.name, closest ? "closest" : "any", variant.suffix);
     std::size_t const n = set.rays.size();
