@@ -64,6 +64,7 @@
 // million rays, log scale; y: Mrays/s; configurations without false misses are drawn hollow at
 // the 95 % upper bound 3/N of the rule of three).
 #include <algorithm>
+#include <atomic>
 #include <array>
 #include <bit>
 #include <chrono>
@@ -426,20 +427,30 @@ reference_set make_reference(ray_set const& set) {
     std::size_t const checked = std::min<std::size_t>(1000, set.rays.size());
     std::vector<std::uint32_t> all(s.mesh.size());
     for (std::size_t k = 0; k < all.size(); ++k) all[k] = std::uint32_t(k);
+    // The first ray (lowest index) where they disagree is reported from this thread once the
+    // loop is done: exiting from a worker thread would tear the thread pool down under itself.
+    std::atomic<std::size_t> first_bad{checked};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, checked, 16), [&](auto const& range) {
         for (std::size_t i = range.begin(); i < range.end(); ++i) {
             auto const& r = set.rays[i];
             auto const brute = closest_exact({r.origin, r.direction, r.tmin, r.tmax}, s.mesh, all);
             auto const& fast = ref.hits[i];
             if (brute.hit != fast.hit || brute.t != fast.t || brute.tied != fast.tied) {
-                std::fprintf(stderr,
-                             "accuracy: %s ray %zu: the BVH candidates and a brute-force loop disagree "
-                             "(hit %d/%d, t %.9g/%.9g)\n",
-                             set.name.c_str(), i, int(fast.hit), int(brute.hit), double(fast.t), double(brute.t));
-                std::exit(1);
+                std::size_t seen = first_bad.load();
+                while (i < seen && !first_bad.compare_exchange_weak(seen, i)) {}
             }
         }
     });
+    if (std::size_t const i = first_bad.load(); i < checked) {
+        auto const& r = set.rays[i];
+        auto const brute = closest_exact({r.origin, r.direction, r.tmin, r.tmax}, s.mesh, all);
+        auto const& fast = ref.hits[i];
+        std::fprintf(stderr,
+                     "accuracy: %s ray %zu: the BVH candidates and a brute-force loop disagree "
+                     "(hit %d/%d, t %.9g/%.9g)\n",
+                     set.name.c_str(), i, int(fast.hit), int(brute.hit), double(fast.t), double(brute.t));
+        std::exit(1);
+    }
     return ref;
 }
 
