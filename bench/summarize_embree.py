@@ -5,7 +5,9 @@
     bench/summarize_embree.py embree.md
 
 Prints, for every scene, the ratio Canopy / Embree of the medians at 1 and 2 threads of each
-figure that has a target (docs/performance.md), and whether the target is met.
+figure that has a target (docs/performance.md), and whether the target is met. With --coherent
+rows in the output, also the batch queries' table: the batch against Embree's best of packet8,
+packet16 and stream (coherent sets), and against Canopy's single rays (random sets).
 """
 import re
 import sys
@@ -44,6 +46,52 @@ def parse(path):
     return scenes
 
 
+# (ray set and query, label, target, what the ratio compares) of the --coherent rows.
+COHERENT_TARGETS = [
+    ("primary closest", "primary closest", 1.2, "embree"),
+    ("primary any", "primary any", 1.0, "embree"),
+    ("shadow any", "shadow any", 1.0, "embree"),
+    ("random closest", "random closest, batch / single", 0.97, "single"),
+    ("random any", "random any, batch / single", 0.97, "single"),
+]
+
+
+def parse_coherent(path):
+    """{scene: {(threads, figure): (batch / Embree's best, batch / single)}} of the --coherent rows."""
+    scenes, scene = {}, None
+    for line in open(path, encoding="utf-8"):
+        heading = re.match(r"## (\S+)", line)
+        if heading:
+            scene = heading.group(1)
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if scene is None or len(cells) < 5 or ", batch vs Embree " not in cells[1]:
+            continue
+        single = re.search(r"batch / single ([0-9.]+)", cells[1])
+        figure = cells[1].split(", batch vs Embree ")[0]
+        scenes.setdefault(scene, {})[(cells[0], figure)] = (
+            float(cells[4].strip("*")), float(single.group(1)) if single else None)
+    return scenes
+
+
+def print_coherent(scenes):
+    print()
+    print("| scene | " + " | ".join(f"{label} (≥ {goal})" for _, label, goal, _ in COHERENT_TARGETS) + " |")
+    print("|---|" + "---|" * len(COHERENT_TARGETS))
+    for name, values in scenes.items():
+        cells = []
+        for figure, _, goal, against in COHERENT_TARGETS:
+            got = [values.get((t, figure)) for t in ("1", "2")]
+            got = [g[0] if against == "embree" else g[1] for g in got if g is not None]
+            got = [g for g in got if g is not None]
+            if not got:
+                cells.append("–")
+                continue
+            text = " / ".join(f"{g:.2f}" for g in got)
+            cells.append(text if all(g >= goal for g in got) else f"**{text}**")
+        print(f"| {name} | " + " | ".join(cells) + " |")
+
+
 def main():
     if len(sys.argv) != 2:
         sys.exit(__doc__)
@@ -72,6 +120,9 @@ def main():
             continue
         goal_text = "–" if goal is None else (f"≥ {goal}" if larger else f"≤ {goal}")
         print(f"| {label} | {goal_text} | " + " | ".join(cells) + " |")
+    coherent = parse_coherent(sys.argv[1])
+    if coherent:
+        print_coherent(coherent)
 
 
 if __name__ == "__main__":
