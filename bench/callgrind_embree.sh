@@ -43,6 +43,11 @@ for k in "${!figures[@]}"; do
   core=$(awk '/:rtcIntersect1( |$)|:rtcOccluded1( |$)/ {gsub(",", "", $1); s += $1} END {print s + 0}' <<<"$ann")
   canopy=$(awk '/start_for/ && /7execute/ && /UlvE_clEv/ {gsub(",", "", $1); s += $1} END {print s + 0}' <<<"$ann")
   embree=$(awk '/start_for/ && /7execute/ && /UlvE0_clEv/ {gsub(",", "", $1); s += $1} END {print s + 0}' <<<"$ann")
+  # A loop that matched nothing means the names above no longer fit the bench's source.
+  [ "$canopy" != 0 ] && [ "$embree" != 0 ] || {
+    echo "callgrind_embree: no traced loop found for ${figures[$k]} (were measure_figure's lambdas reordered?)" >&2
+    exit 1
+  }
   awk -v f="${figures[$k]}" -v n="$n" -v c="$canopy" -v e="$embree" -v r="$core" \
     'BEGIN { printf "| %s | %d | %.0f | %.0f | %.0f | %.2f |\n", f, n, c / n, e / n, r / n, (e > 0 ? c / e : 0) }'
 done
