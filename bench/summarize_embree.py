@@ -30,19 +30,39 @@ TARGETS = [
 ]
 
 
-def parse(path):
-    """{scene: {(threads, figure): ratio of medians}}"""
-    scenes, scene = {}, None
+def table_rows(path):
+    """(scene, cells) for each table row of the output under a scene's heading, and (scene, None)
+    at the heading itself."""
+    scene = None
     for line in open(path, encoding="utf-8"):
         heading = re.match(r"## (\S+)", line)
         if heading:
             scene = heading.group(1)
-            scenes[scene] = {}
+            yield scene, None
             continue
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if scene is None or len(cells) < 5 or not cells[4].startswith("**"):
-            continue
-        scenes[scene][(cells[0], cells[1])] = float(cells[4].strip("*"))
+        if scene is not None and len(cells) >= 5:
+            yield scene, cells
+
+
+def cell_text(got, goal, larger=True):
+    """The figures of one cell (1 and 2 threads), in bold when a goal is missed; – when none."""
+    got = [g for g in got if g is not None]
+    if not got:
+        return "–"
+    text = " / ".join(f"{g:.2f}" for g in got)
+    if goal is None or all((g >= goal) if larger else (g <= goal) for g in got):
+        return text
+    return f"**{text}**"
+
+
+def parse(path):
+    """{scene: {(threads, figure): ratio of medians}}"""
+    scenes = {}
+    for scene, cells in table_rows(path):
+        values = scenes.setdefault(scene, {})
+        if cells is not None and cells[4].startswith("**"):
+            values[(cells[0], cells[1])] = float(cells[4].strip("*"))
     return scenes
 
 
@@ -58,14 +78,9 @@ COHERENT_TARGETS = [
 
 def parse_coherent(path):
     """{scene: {(threads, figure): (batch / Embree's best, batch / single)}} of the --coherent rows."""
-    scenes, scene = {}, None
-    for line in open(path, encoding="utf-8"):
-        heading = re.match(r"## (\S+)", line)
-        if heading:
-            scene = heading.group(1)
-            continue
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if scene is None or len(cells) < 5 or ", batch vs Embree " not in cells[1]:
+    scenes = {}
+    for scene, cells in table_rows(path):
+        if cells is None or ", batch vs Embree " not in cells[1]:
             continue
         single = re.search(r"batch / single ([0-9.]+)", cells[1])
         figure = cells[1].split(", batch vs Embree ")[0]
@@ -81,14 +96,8 @@ def print_coherent(scenes):
     for name, values in scenes.items():
         cells = []
         for figure, _, goal, against in COHERENT_TARGETS:
-            got = [values.get((t, figure)) for t in ("1", "2")]
-            got = [g[0] if against == "embree" else g[1] for g in got if g is not None]
-            got = [g for g in got if g is not None]
-            if not got:
-                cells.append("–")
-                continue
-            text = " / ".join(f"{g:.2f}" for g in got)
-            cells.append(text if all(g >= goal for g in got) else f"**{text}**")
+            pairs = [values.get((t, figure)) for t in ("1", "2")]
+            cells.append(cell_text([p[0] if against == "embree" else p[1] for p in pairs if p is not None], goal))
         print(f"| {name} | " + " | ".join(cells) + " |")
 
 
@@ -107,15 +116,7 @@ def main():
                 got = [values.get(("–", figure))]
             else:
                 got = [values.get((t, figure)) for t in ("1", "2")]
-            got = [g for g in got if g is not None]
-            if not got:
-                cells.append("–")
-                continue
-            text = " / ".join(f"{g:.2f}" for g in got)
-            if goal is not None:
-                met = all((g >= goal) if larger else (g <= goal) for g in got)
-                text = text if met else f"**{text}**"
-            cells.append(text)
+            cells.append(cell_text(got, goal, larger))
         if all(c == "–" for c in cells):
             continue
         goal_text = "–" if goal is None else (f"≥ {goal}" if larger else f"≤ {goal}")
