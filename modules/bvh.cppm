@@ -10,6 +10,7 @@ export import canopy.intersector;
 export import :storage;
 export import :protocol;
 export import :parallel;
+export import :block_cache;
 export import :build_buffer;
 export import :wide;
 export import :binning;

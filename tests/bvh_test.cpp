@@ -769,6 +769,69 @@ TEST_CASE("a BVH's large arrays start on 2 MiB boundaries, and a copy of a BVH h
     check_build_contract(soup, copy, {});
 }
 
+TEST_CASE("freed large arrays are kept for the next ones that fit, within the cache's limit") {
+    constexpr std::size_t mib = std::size_t(1) << 20;
+    std::size_t const old_limit = canopy::memory_cache_limit();
+    canopy::release_cached_memory();
+    REQUIRE(canopy::cached_memory() == 0);
+    canopy::large_array_allocator<std::byte> bytes;
+
+    // Freed: kept (rounded up to whole 2 MiB pages), and given back, contents as left, to a request
+    // that fits (at least as large, at most twice).
+    std::byte* const a = bytes.allocate(5 * mib);
+    a[0] = std::byte{42};
+    bytes.deallocate(a, 5 * mib);
+    CHECK(canopy::cached_memory() == 6 * mib);
+    std::byte* const too_small_for = bytes.allocate(2 * mib); // 6 MiB is more than twice 2 MiB
+    CHECK(too_small_for != a);
+    CHECK(canopy::cached_memory() == 6 * mib);
+    std::byte* const too_large_for = bytes.allocate(7 * mib);
+    CHECK(too_large_for != a);
+    std::byte* const reused = bytes.allocate(4 * mib);
+    CHECK(reused == a);
+    CHECK(reused[0] == std::byte{42});
+    CHECK(canopy::cached_memory() == 0);
+    reused[4 * mib - 1] = std::byte{1};
+
+    // The best fit of several.
+    bytes.deallocate(too_small_for, 2 * mib);
+    bytes.deallocate(too_large_for, 7 * mib);
+    bytes.deallocate(reused, 4 * mib); // its 6 MiB, not its 4
+    CHECK(canopy::cached_memory() == (2 + 8 + 6) * mib);
+    std::byte* const best = bytes.allocate(5 * mib + 1);
+    CHECK(best == a);
+    bytes.deallocate(best, 5 * mib + 1);
+
+    // The limit: the oldest blocks go first; a block larger than the limit is never kept.
+    canopy::set_memory_cache_limit(12 * mib);
+    CHECK(canopy::memory_cache_limit() == 12 * mib);
+    CHECK(canopy::cached_memory() <= 12 * mib);
+    std::byte* const huge = bytes.allocate(13 * mib);
+    bytes.deallocate(huge, 13 * mib);
+    CHECK(canopy::cached_memory() <= 12 * mib);
+    canopy::set_memory_cache_limit(0);
+    CHECK(canopy::cached_memory() == 0);
+    std::byte* const uncached = bytes.allocate(3 * mib);
+    bytes.deallocate(uncached, 3 * mib);
+    CHECK(canopy::cached_memory() == 0);
+
+    // A build's arrays go back to the cache with the BVH, and the next build takes them.
+    canopy::set_memory_cache_limit(old_limit);
+    random_source rng(8);
+    auto const soup = soup_to_renumber(rng, 60000, 50.0f, 1.0f);
+    {
+        mesh_bvh const first = canopy::build_binned_sah(soup, {.quality = canopy::build_quality::fast});
+        REQUIRE(first.blocks.size() * sizeof(first.blocks[0]) >= 2 * mib);
+    }
+    std::size_t const after_first = canopy::cached_memory();
+    CHECK(after_first > 0);
+    mesh_bvh const second = canopy::build_binned_sah(soup, {.quality = canopy::build_quality::fast});
+    CHECK(canopy::cached_memory() <= after_first);
+    check_build_contract(soup, second, {});
+    CHECK(canopy::release_cached_memory() > 0);
+    CHECK(canopy::cached_memory() == 0);
+}
+
 TEST_CASE("build_quality::high keeps max_depth, and never splits triangles with NaN or infinite coordinates") {
     random_source rng(72);
     auto input = test_support::sliver_mesh();

@@ -3,8 +3,10 @@
 // large_array_allocator<T> (exported: the type of bvh::wide_nodes and bvh::blocks): std::allocator,
 // except that arrays of 2 MiB and more start on a 2 MiB boundary and are offered to the kernel as
 // huge pages (Linux's transparent huge pages in `madvise` mode, where the system allows them): one
-// page fault per 2 MiB instead of one per 4 KiB when the builder first writes them. Elements are
-// constructed as by std::allocator.
+// page fault per 2 MiB instead of one per 4 KiB when the builder first writes them. They come from
+// and return to canopy.bvh:block_cache, which keeps freed ones for the next build (their first
+// writes are what costs on virtual machines that hand freed memory back to the host). Elements
+// are constructed as by std::allocator.
 //
 // build_buffer<T> (the builder's own): a vector whose resize() leaves new elements as the
 // allocation made them. std::vector::resize value-initialises every new element on one thread:
@@ -22,10 +24,8 @@ module;
 #include <type_traits>
 #include <utility>
 #include <vector>
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
 export module canopy.bvh:build_buffer;
+import :block_cache;
 
 export namespace canopy {
 
@@ -42,15 +42,13 @@ struct large_array_allocator {
         if (n > std::size_t(-1) / sizeof(T)) throw std::bad_array_new_length();
         std::size_t const bytes = n * sizeof(T);
         if (bytes < huge_page) return std::allocator<T>().allocate(n);
-        void* const p = ::operator new(bytes, std::align_val_t(huge_page));
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-        ::madvise(p, bytes, MADV_HUGEPAGE); // advice only: where it fails, pages stay 4 KiB
-#endif
-        return static_cast<T*>(p);
+        if (bytes > std::size_t(-1) - huge_page) throw std::bad_array_new_length();
+        // Whole huge pages (the last one too), from the cache of freed blocks where one fits.
+        return static_cast<T*>(detail::block_cache::instance().allocate((bytes + huge_page - 1) / huge_page * huge_page));
     }
     void deallocate(T* p, std::size_t n) noexcept {
         if (n * sizeof(T) < huge_page) return std::allocator<T>().deallocate(p, n);
-        ::operator delete(p, std::align_val_t(huge_page));
+        detail::block_cache::instance().deallocate(p);
     }
 
     template <typename U>
