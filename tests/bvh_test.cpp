@@ -828,6 +828,27 @@ TEST_CASE("freed large arrays are kept for the next ones that fit, within the ca
     mesh_bvh const second = canopy::build_binned_sah(soup, {.quality = canopy::build_quality::fast});
     CHECK(canopy::cached_memory() <= after_first);
     check_build_contract(soup, second, {});
+
+    // A user's resize of the BVH's vector type still value-initialises, even on a block that a
+    // BVH's triangles filled before (the builder alone leaves its blocks to be written whole).
+    std::size_t const block_count = second.blocks.size();
+    canopy::release_cached_memory();
+    canopy::triangle_block const* filled = nullptr;
+    {
+        mesh_bvh const dropped = second;
+        REQUIRE(dropped.blocks.size() == block_count);
+        filled = dropped.blocks.data();
+    }
+    {
+        std::vector<canopy::triangle_block, canopy::large_array_allocator<canopy::triangle_block>> blocks;
+        blocks.resize(block_count);
+        CHECK(blocks.data() == filled); // the case under test: the same memory
+        std::size_t written = 0;
+        for (auto const& block : blocks)
+            written += block.testable != 0 || block.prim_id[0] != canopy::triangle_block::invalid_ids()[0] ||
+                       block.vertex[0][0][0] != 0.0f;
+        CHECK(written == 0);
+    }
     CHECK(canopy::release_cached_memory() > 0);
     CHECK(canopy::cached_memory() == 0);
 }

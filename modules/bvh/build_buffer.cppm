@@ -27,6 +27,11 @@ module;
 export module canopy.bvh:build_buffer;
 import :block_cache;
 
+namespace canopy::detail {
+// Set by unwritten_resize (below) on the thread that resizes.
+inline thread_local bool resize_leaves_unwritten = false;
+} // namespace canopy::detail
+
 export namespace canopy {
 
 template <typename T>
@@ -49,6 +54,20 @@ struct large_array_allocator {
     void deallocate(T* p, std::size_t n) noexcept {
         if (n * sizeof(T) < huge_page) return std::allocator<T>().deallocate(p, n);
         detail::block_cache::instance().deallocate(p);
+    }
+
+    // Value-initialisation (resize(n)), as std::allocator does it, except inside a builder's
+    // detail::unwritten_resize on this thread, where elements of implicit-lifetime types are left
+    // as the allocation made them (the builder then writes each one whole, in parallel).
+    template <typename U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        if constexpr (std::is_trivially_copyable_v<U> && std::is_trivially_destructible_v<U>)
+            if (detail::resize_leaves_unwritten) return;
+        ::new (static_cast<void*>(p)) U();
+    }
+    template <typename U, typename... Args>
+    void construct(U* p, Args&&... args) {
+        std::construct_at(p, std::forward<Args>(args)...);
     }
 
     template <typename U>
@@ -84,5 +103,20 @@ struct uninitialized_allocator : large_array_allocator<T> {
 
 template <typename T>
 using build_buffer = std::vector<T, uninitialized_allocator<T>>;
+
+// v.resize(n) for a vector of the BVH's (large_array_allocator), with the new elements left as
+// the allocation made them, not value-initialised on this one thread. Contract: T is an
+// implicit-lifetime type and the caller writes every new element whole before it is read (or the
+// vector is destroyed).
+template <typename T>
+void unwritten_resize(std::vector<T, large_array_allocator<T>>& v, std::size_t n) {
+    static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>,
+                  "unwritten_resize: for implicit-lifetime element types only");
+    struct flag {
+        flag() { resize_leaves_unwritten = true; }
+        ~flag() { resize_leaves_unwritten = false; }
+    } const set;
+    v.resize(n);
+}
 
 } // namespace canopy::detail

@@ -182,16 +182,20 @@ void pack_triangle_blocks(bvh<Prim>& b, std::span<Prim const> prims, std::vector
         first_block[k + 1] = first_block[k] +
                              std::uint32_t((leaf_end(k) - leaf_starts[k] + triangle_block_width - 1) / triangle_block_width);
     b.blocks.clear();
-    b.blocks.resize(first_block[leaves]);
+    // Not value-initialised here on one thread: each block is made whole below, by the thread
+    // that fills it.
+    detail::unwritten_resize(b.blocks, first_block[leaves]);
     parallel_for_chunks(leaves, 256, [&](std::size_t first, std::size_t last) {
         for (std::size_t k = first; k < last; ++k) {
             std::size_t const begin = leaf_starts[k], end = leaf_end(k);
-            for (std::size_t i = begin; i < end; ++i) {
-                auto& block = b.blocks[first_block[k] + (i - begin) / triangle_block_width];
-                int const lane = int((i - begin) % triangle_block_width);
-                Prim t = prims[order[i]];
-                t.prim_id = order[i];
-                block.set(lane, t);
+            for (std::size_t block_begin = begin; block_begin < end; block_begin += triangle_block_width) {
+                triangle_block block{}; // lanes past the leaf's end: no triangle
+                for (std::size_t i = block_begin, stop = std::min(end, block_begin + triangle_block_width); i < stop; ++i) {
+                    Prim t = prims[order[i]];
+                    t.prim_id = order[i];
+                    block.set(int(i - block_begin), t);
+                }
+                b.blocks[first_block[k] + (block_begin - begin) / triangle_block_width] = block;
             }
         }
     });
