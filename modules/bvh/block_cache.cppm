@@ -64,9 +64,9 @@ public:
                     best = it;
             if (best != free_.end()) {
                 entry const found = *best;
+                live_.emplace(found.pointer, found.bytes); // first: if it throws, the block stays cached
                 free_.erase(best);
                 cached_ -= found.bytes;
-                live_.emplace(found.pointer, found.bytes);
                 return found.pointer;
             }
         }
@@ -74,8 +74,13 @@ public:
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
         ::madvise(p, bytes, MADV_HUGEPAGE); // advice only: where it fails, pages stay 4 KiB
 #endif
-        std::lock_guard lock(mutex_);
-        live_.emplace(p, bytes);
+        try {
+            std::lock_guard lock(mutex_);
+            live_.emplace(p, bytes);
+        } catch (...) { // no room to note it
+            ::operator delete(p, std::align_val_t(huge_page_bytes));
+            throw;
+        }
         return p;
     }
 
