@@ -1512,8 +1512,8 @@ CANOPY_SIMD_INLINE std::uint32_t sign_bits(basic_simd<float, N> x) {
 
 // An N × N block of floats transposed in registers: lane c of rows[r] goes to lane r of rows[c]
 // (an array of N structures of N floats, loaded one structure per vector, becomes one vector
-// per member). AVX2: unpack, shuffle and lane-swap steps; other widths and backends go through
-// memory.
+// per member). AVX2 (8 lanes) and SSE4.2 (4 lanes): unpack and shuffle steps in registers; other
+// widths and backends go through memory.
 template <int N>
 CANOPY_SIMD_INLINE void transpose(std::array<basic_simd<float, N>, std::size_t(N)>& rows) {
 #if defined(CANOPY_SIMD_AVX2)
@@ -1522,6 +1522,14 @@ CANOPY_SIMD_INLINE void transpose(std::array<basic_simd<float, N>, std::size_t(N
         for (std::size_t i = 0; i < 8; ++i) r[i] = rows[i].native();
         detail::transpose_8x8(r);
         for (std::size_t i = 0; i < 8; ++i) rows[i] = basic_simd<float, N>(r[i]);
+        return;
+    }
+#endif
+#if defined(CANOPY_SIMD_SSE42)
+    if constexpr (N == 4) {
+        __m128 r0 = rows[0].native(), r1 = rows[1].native(), r2 = rows[2].native(), r3 = rows[3].native();
+        _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+        rows = {basic_simd<float, N>(r0), basic_simd<float, N>(r1), basic_simd<float, N>(r2), basic_simd<float, N>(r3)};
         return;
     }
 #endif

@@ -197,19 +197,21 @@ split_choice best_split_vector(centroid_bins<S> const& binning, bin_scratch<S>& 
     float4* const plane = scratch.sweep_boxes.data(); // row c (min x, y, z, max x, y, z) at c * bins
     int4* const bin_count = scratch.sweep_counts.data();
     for (std::size_t k = 0; k < bins; ++k) {
-        alignas(16) float rows[6][4] = {};
-        alignas(16) std::int32_t n[4] = {};
-        for (std::size_t a = 0; a < 3; ++a) {
-            alignas(16) float l[4], h[4];
-            scratch.vector_bins[a * bins + k].lo.store_aligned(l);
-            scratch.vector_bins[a * bins + k].hi.store_aligned(h);
-            for (std::size_t c = 0; c < 3; ++c) {
-                rows[c][a] = l[c];
-                rows[3 + c][a] = h[c];
-            }
-            n[a] = std::int32_t(scratch.vector_counts[a * bins + k]);
+        // Rows c of the axes' boxes (lane a: axis a's bin k; lane 3 zero), by transposing the
+        // three axes' box corners.
+        std::array<float4, 4> lo{scratch.vector_bins[k].lo, scratch.vector_bins[bins + k].lo,
+                                 scratch.vector_bins[2 * bins + k].lo, float4(0.0f)};
+        std::array<float4, 4> hi{scratch.vector_bins[k].hi, scratch.vector_bins[bins + k].hi,
+                                 scratch.vector_bins[2 * bins + k].hi, float4(0.0f)};
+        simd::transpose(lo);
+        simd::transpose(hi);
+        for (std::size_t c = 0; c < 3; ++c) {
+            plane[c * bins + k] = lo[c];
+            plane[(3 + c) * bins + k] = hi[c];
         }
-        for (std::size_t c = 0; c < 6; ++c) plane[c * bins + k] = float4::load_aligned(rows[c]);
+        alignas(16) std::int32_t const n[4] = {std::int32_t(scratch.vector_counts[k]),
+                                               std::int32_t(scratch.vector_counts[bins + k]),
+                                               std::int32_t(scratch.vector_counts[2 * bins + k]), 0};
         bin_count[k] = int4::load_aligned(n);
     }
     // surface_area of each lane's box (canopy.math): 2 · (dx·dy + dy·dz + dz·dx), 0 when empty.
