@@ -11,12 +11,11 @@
 //
 // The cache keeps freed large blocks (up to memory_cache_limit() bytes in all, 1 GiB by default)
 // and hands them to the next allocations that fit, best fit, a block at most twice the size asked
-// for. Contract: a block returned by take() holds whatever its last user wrote (the allocators
+// for. Contract: a block returned by allocate() holds whatever its last user wrote (the allocators
 // above construct or write every element before it is read); a block is never shared; every
 // operation is thread-safe. release_cached_memory() frees what the cache holds, and
 // set_memory_cache_limit(0) turns the cache off.
 module;
-#include <algorithm>
 #include <cstddef>
 #include <mutex>
 #include <new>
@@ -42,6 +41,7 @@ std::size_t cached_memory() noexcept;
 
 namespace canopy::detail {
 
+// The size and alignment of the blocks (one huge page on x86-64 Linux); large_array_allocator's.
 inline constexpr std::size_t huge_page_bytes = std::size_t(2) << 20;
 
 class block_cache {

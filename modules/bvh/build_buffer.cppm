@@ -37,7 +37,7 @@ export namespace canopy {
 template <typename T>
 struct large_array_allocator {
     using value_type = T;
-    static constexpr std::size_t huge_page = std::size_t(2) << 20;
+    static constexpr std::size_t huge_page = detail::huge_page_bytes;
 
     large_array_allocator() = default;
     template <typename U>
@@ -65,10 +65,7 @@ struct large_array_allocator {
             if (detail::resize_leaves_unwritten) return;
         ::new (static_cast<void*>(p)) U();
     }
-    template <typename U, typename... Args>
-    void construct(U* p, Args&&... args) {
-        std::construct_at(p, std::forward<Args>(args)...);
-    }
+    // (Construction with arguments: std::allocator_traits' default, std::construct_at.)
 
     template <typename U>
     bool operator==(large_array_allocator<U> const&) const noexcept {
