@@ -909,3 +909,64 @@ TEST_CASE("packets whose lanes share one shear permutation test triangles and bl
     CHECK(uniform_packets >= 1000);
     CHECK(mixed_packets >= 100);
 }
+
+TEST_CASE("a packet's block test lane by lane gives each lane the first and the nearest hit of the triangles one at a time") {
+    // The reference: each lane's scalar ray against the block's triangles one at a time, in block
+    // order; the first hit (what any hit keeps) and the hit with the smallest t, then the
+    // smallest prim_id (what closest hit keeps). Duplicated triangles with their ids in reverse
+    // order make ties of t that only the prim_id decides; lanes outside `live` get no hit.
+    random_source rng(35);
+    int lanes_hit = 0, ties = 0;
+    for (int i = 0; i < 3000; ++i) {
+        auto [tris, block] = random_block(rng, i);
+        int const used = int(tris.size());
+        if (used >= 2 && i % 3 == 0) {
+            // The last triangle again, in a lower lane with a higher prim_id.
+            auto dup = tris.back();
+            dup.prim_id += 1000;
+            tris[0] = dup;
+            block.set(0, dup);
+        }
+        auto const& target = tris[std::size_t(rng.integer(0, used - 1))];
+        int const axis = rng.integer(0, 2);
+        float const sign = rng.integer(0, 1) == 0 ? 1.0f : -1.0f;
+        std::array<ray, 8> rays;
+        for (auto& r : rays) {
+            vec3<float> d(rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f));
+            d[axis] = sign * rng.uniform(1.0f, 2.0f);
+            float const b1 = rng.uniform(-0.2f, 1.0f), b2 = rng.uniform(-0.2f, 1.0f - b1);
+            vec3<float> const p = target.v0 + (target.v1 - target.v0) * b1 + (target.v2 - target.v0) * b2;
+            r = make_ray(p - d * rng.uniform(0.5f, 20.0f), d);
+            if (rng.integer(0, 7) == 0) r.tmax = rng.uniform(0.0f, 10.0f); // some hits beyond tmax
+        }
+        canopy::prepared_ray<float8> packet(pack(rays));
+        REQUIRE(packet.shear.uniform);
+        std::uint32_t const live = std::uint32_t(rng.integer(0, 255));
+        std::uint32_t const used_mask = (1u << used) - 1u;
+        auto const first = canopy::intersect_block_by_lanes<false>(packet, block, used_mask, live);
+        auto const nearest = canopy::intersect_block_by_lanes<true>(packet, block, used_mask, live);
+        for (int lane = 0; lane < 8; ++lane) {
+            INFO("case " << i << ", lane " << lane);
+            canopy::basic_hit_record<float> ref_first, ref_nearest;
+            int hits = 0;
+            if ((live >> lane) & 1u) {
+                for (auto const& tri : tris) {
+                    auto const one = intersect(rays[std::size_t(lane)], tri);
+                    if (!one.hit) continue;
+                    ++hits;
+                    if (!ref_first.hit) ref_first = one;
+                    if (!ref_nearest.hit || one.t < ref_nearest.t ||
+                        (one.t == ref_nearest.t && one.prim_id < ref_nearest.prim_id)) {
+                        ties += ref_nearest.hit && one.t == ref_nearest.t;
+                        ref_nearest = one;
+                    }
+                }
+            }
+            lanes_hit += hits > 0;
+            check_lane_equals_scalar(first, lane, ref_first);
+            check_lane_equals_scalar(nearest, lane, ref_nearest);
+        }
+    }
+    CHECK(lanes_hit > 3000);
+    CHECK(ties > 100);
+}

@@ -107,17 +107,25 @@ struct triangle_block_hits {
     }
 };
 
-// The testable lanes of b against a prepared ray (its watertight shear and permuted origin
-// known). Lane by lane the operations of intersect_watertight (canopy.geometry:triangle), in the
-// same order.
-[[gnu::always_inline]] inline triangle_block_hits intersect_block(prepared_ray<float> const& ray,
-                                                                  triangle_block const& b) {
+// What the block test needs of one ray: its watertight shear (the axis permutation and the
+// shear constants), its origin in the permuted axis order, and [tmin, tmax]. From a scalar
+// prepared ray, or from one lane of a packet whose lanes share the permutation
+// (intersect_block_by_lanes).
+struct block_test_ray {
+    std::size_t kx, ky, kz;
+    float ox, oy, oz;
+    float sx, sy, sz;
+    float tmin, tmax;
+};
+
+// The testable lanes of b against one ray. Lane by lane the operations of intersect_watertight
+// (canopy.geometry:triangle), in the same order.
+[[gnu::always_inline]] inline triangle_block_hits intersect_block(block_test_ray const& ray, triangle_block const& b) {
     using V = block_float;
     triangle_block_hits h;
-    auto const& shear = ray.shear;
-    auto const kx = std::size_t(shear.kx), ky = std::size_t(shear.ky), kz = std::size_t(shear.kz);
-    V const ox(ray.permuted_origin.x), oy(ray.permuted_origin.y), oz(ray.permuted_origin.z);
-    V const sx(shear.sx), sy(shear.sy), sz(shear.sz);
+    auto const kx = ray.kx, ky = ray.ky, kz = ray.kz;
+    V const ox(ray.ox), oy(ray.oy), oz(ray.oz);
+    V const sx(ray.sx), sy(ray.sy), sz(ray.sz);
 
     // Translate to the ray origin, permute, shear (each vertex on its own).
     auto const sheared = [&](std::size_t k, V& x, V& y, V& z) {
@@ -149,6 +157,79 @@ struct triangle_block_hits {
     ew.store(h.ew.data());
     det.store(h.det.data());
     return h;
+}
+
+// The block test of a scalar prepared ray (its watertight shear and permuted origin known).
+[[gnu::always_inline]] inline triangle_block_hits intersect_block(prepared_ray<float> const& ray,
+                                                                  triangle_block const& b) {
+    auto const& s = ray.shear;
+    return intersect_block(block_test_ray{std::size_t(s.kx), std::size_t(s.ky), std::size_t(s.kz),
+                                          ray.permuted_origin.x, ray.permuted_origin.y, ray.permuted_origin.z,
+                                          s.sx, s.sy, s.sz, ray.tmin, ray.tmax},
+                           b);
+}
+
+// The lanes of b in `used` (a leaf's triangles) of a packet whose lanes share one shear
+// permutation (ray.shear.uniform), tested lane by lane of the packet instead of triangle by
+// triangle: each lane in `live` runs the block test of a scalar ray (intersect_block) with its own
+// shear constants, permuted origin, tmin and tmax. The same operations on the same values as
+// intersect_lane, so every (lane, triangle) pair hits or misses alike, with the same t, u and v.
+// Each lane's record holds one of its hits: the first in block order when !Nearest (what an
+// any-hit query keeps, testing the triangles in order), else the one with the smallest t, then
+// the smallest prim_id (what a closest-hit query keeps: its rule, canopy.query:single, among hits
+// of one leaf, which share the instance path). Cheaper than the triangle-by-triangle loop when
+// fewer lanes take part than the block has triangles (a packet's lanes that did not reach the leaf,
+// or finished, have tmax −inf and are not in `live`).
+template <bool Nearest, typename T>
+    requires(simd::simd_width_v<T> > 1)
+[[gnu::always_inline]] inline basic_hit_record<T> intersect_block_by_lanes(prepared_ray<T> const& ray,
+                                                                           triangle_block const& b,
+                                                                           std::uint32_t used, std::uint32_t live) {
+    constexpr int W = simd::simd_width_v<T>;
+    using index_t = index_type_t<T>;
+    alignas(64) std::array<float, W> ox, oy, oz, sx, sy, sz, tmin, tmax;
+    ray.permuted_origin.x.store(ox.data());
+    ray.permuted_origin.y.store(oy.data());
+    ray.permuted_origin.z.store(oz.data());
+    ray.shear.sx.store(sx.data());
+    ray.shear.sy.store(sy.data());
+    ray.shear.sz.store(sz.data());
+    ray.tmin.store(tmin.data());
+    ray.tmax.store(tmax.data());
+    alignas(64) std::array<float, W> t, u, v;
+    alignas(64) std::array<std::int32_t, W> prim, geom;
+    std::uint32_t hit = 0;
+    auto const kx = std::size_t(ray.shear.kx), ky = std::size_t(ray.shear.ky), kz = std::size_t(ray.shear.kz);
+    for (; live != 0; live &= live - 1) {
+        auto const k = std::size_t(std::countr_zero(live));
+        auto const h = intersect_block(block_test_ray{kx, ky, kz, ox[k], oy[k], oz[k], sx[k], sy[k], sz[k], tmin[k], tmax[k]}, b);
+        std::uint32_t const mask = h.mask & used;
+        if (mask == 0) continue;
+        int lane = std::countr_zero(mask);
+        if constexpr (Nearest) {
+            for (std::uint32_t rest = mask & (mask - 1); rest != 0; rest &= rest - 1) {
+                int const other = std::countr_zero(rest);
+                auto const o = std::size_t(other), l = std::size_t(lane);
+                if (h.t[o] < h.t[l] || (h.t[o] == h.t[l] && b.prim_id[o] < b.prim_id[l])) lane = other;
+            }
+        }
+        auto const l = std::size_t(lane);
+        hit |= 1u << k;
+        t[k] = h.t[l];
+        u[k] = h.ev[l] / h.det[l];
+        v[k] = h.ew[l] / h.det[l];
+        prim[k] = std::int32_t(b.prim_id[l]);
+        geom[k] = std::int32_t(b.geom_id[l]);
+    }
+    basic_hit_record<T> hr;
+    if (hit == 0) return hr;
+    hr.hit = simd::mask_type_t<T>::from_bits(hit);
+    hr.t = simd::select(hr.hit, T::load(t.data()), hr.t);
+    hr.u = simd::select(hr.hit, T::load(u.data()), T(0));
+    hr.v = simd::select(hr.hit, T::load(v.data()), T(0));
+    hr.prim_id = simd::select(hr.hit, index_t::load(prim.data()), hr.prim_id);
+    hr.geom_id = simd::select(hr.hit, index_t::load(geom.data()), hr.geom_id);
+    return hr;
 }
 
 // Lane `lane` of b against a SIMD ray (a packet): what intersect(ray, b.triangle_at(lane)) returns,
