@@ -211,23 +211,18 @@ template <typename Ray, typename Prim, typename I, typename Query>
     }
 }
 
-// A packet tests a leaf block lane by lane (intersect_block_by_lanes) when fewer than this many
-// lanes per triangle of the block take part, else triangle by triangle (intersect_lane). Measured
-// (docs/performance.md, Run 28): by lanes costs about half a triangle-by-triangle test per lane;
-// fewer than 1, 2 or 8 lanes per triangle gave the same times within noise, 2 the fewest
-// instructions.
-inline constexpr int packet_lanes_per_triangle_by_lanes = 2;
-
 // The first `count` triangles of a leaf block. A triangle hook of the intersector sees them one
 // at a time, exactly as given (triangle_at), as the paper's API promises. Otherwise packets test
-// them one at a time, read from the block (intersect_lane), or the block lane by lane of the
-// packet (intersect_block_by_lanes) when it has no filter and few lanes take part; for scalar rays the block's triangles
-// are tested at once (intersect_block: bit-identical lane by lane; degenerate triangles are known
-// from the block and never tested) and the hit lanes go to the filter and the query: in lane
-// order for queries that stop at any hit (the first hit in leaf order, as one at a time would
-// find), by increasing (t, prim_id) otherwise, each while its t is still within the ray's
-// tightening tmax, and for a collector that keeps only the nearest hit up to the first that the
-// filter keeps.
+// them one at a time, read from the block (intersect_lane), or, with no filter, the block lane by
+// lane of the packet (intersect_block_by_lanes) when fewer lanes take part than the block has
+// triangles: one pass of either costs about the same (docs/performance.md, Run 28; lanes <
+// triangles / 2 gives up some of the models' gain, lanes < 2 × triangles costs the slivers'
+// leaves, where most lanes miss, 10 %). For scalar rays the block's triangles are tested at once
+// (intersect_block: bit-identical lane by lane; degenerate triangles are known from the block and
+// never tested) and the hit lanes go to the filter and the query: in lane order for queries that
+// stop at any hit (the first hit in leaf order, as one at a time would find), by increasing
+// (t, prim_id) otherwise, each while its t is still within the ray's tightening tmax, and for a
+// collector that keeps only the nearest hit up to the first that the filter keeps.
 template <typename Ray, typename I, typename Query>
 [[gnu::always_inline]] inline bool call_hooks_or_descend(Ray& ray, triangle_block const& block, int count, I& isect,
                                                          Query& query) {
@@ -237,13 +232,13 @@ template <typename Ray, typename I, typename Query>
         return false;
     } else if constexpr (simd::simd_width_v<ray_value_t<Ray>> != 1) {
         // Packets with no filter, whose lanes share one shear permutation: lane by lane of the
-        // packet when few lanes take part (packet_lanes_per_triangle_by_lanes), with
+        // packet when fewer lanes take part than the block has triangles, with
         // intersect_block_by_lanes: the same tests, and for each lane the hit the loop below would
         // leave it with, reported at once.
         if constexpr (!filter_hook_for<I, Ray>) {
             if (ray.shear.uniform) {
                 std::uint32_t const live = simd::movemask(ray.tmin <= ray.tmax);
-                if (std::popcount(live) < count * packet_lanes_per_triangle_by_lanes)
+                if (std::popcount(live) < count)
                     return query.report(intersect_block_by_lanes<Query::wants_near_first>(
                                             ray, block, (1u << count) - 1u, live),
                                         ray);
