@@ -159,14 +159,51 @@ struct block_test_ray {
     return h;
 }
 
-// The block test of a scalar prepared ray (its watertight shear and permuted origin known).
+// The testable lanes of b against a prepared ray (its watertight shear and permuted origin
+// known). Lane by lane the operations of intersect_watertight (canopy.geometry:triangle), in the
+// same order. The same body as the block_test_ray form above, kept as it is written here: built
+// with -ffp-contract=fast (which overrides this file's pragma) the scalar paths then still round
+// as the one-triangle test does, which the contract-fast preset's stress tests check; calling the
+// other form made 83 of its hit-iff-tmin-≤-t-≤-tmax checks fail there.
 [[gnu::always_inline]] inline triangle_block_hits intersect_block(prepared_ray<float> const& ray,
                                                                   triangle_block const& b) {
-    auto const& s = ray.shear;
-    return intersect_block(block_test_ray{std::size_t(s.kx), std::size_t(s.ky), std::size_t(s.kz),
-                                          ray.permuted_origin.x, ray.permuted_origin.y, ray.permuted_origin.z,
-                                          s.sx, s.sy, s.sz, ray.tmin, ray.tmax},
-                           b);
+    using V = block_float;
+    triangle_block_hits h;
+    auto const& shear = ray.shear;
+    auto const kx = std::size_t(shear.kx), ky = std::size_t(shear.ky), kz = std::size_t(shear.kz);
+    V const ox(ray.permuted_origin.x), oy(ray.permuted_origin.y), oz(ray.permuted_origin.z);
+    V const sx(shear.sx), sy(shear.sy), sz(shear.sz);
+
+    // Translate to the ray origin, permute, shear (each vertex on its own).
+    auto const sheared = [&](std::size_t k, V& x, V& y, V& z) {
+        z = V::load(b.vertex[k][kz].data()) - oz;
+        x = (V::load(b.vertex[k][kx].data()) - ox) - sx * z;
+        y = (V::load(b.vertex[k][ky].data()) - oy) - sy * z;
+    };
+    V ax, ay, az, bx, by, bz, cx, cy, cz;
+    sheared(0, ax, ay, az);
+    sheared(1, bx, by, bz);
+    sheared(2, cx, cy, cz);
+
+    // Sign-exact edge functions; inside (edges included) when all share a sign.
+    V const eu = difference_of_products(cx, by, cy, bx);
+    V const ev = difference_of_products(ax, cy, ay, cx);
+    V const ew = difference_of_products(bx, ay, by, ax);
+    V const zero(0.0f);
+    auto const inside = block_mask::from_bits(b.testable) & (((eu >= zero) & (ev >= zero) & (ew >= zero)) | ((eu <= zero) & (ev <= zero) & (ew <= zero)));
+    if (simd::none(inside)) return h;
+
+    V const det = eu + ev + ew;
+    V const scaled_t = eu * (sz * az) + ev * (sz * bz) + ew * (sz * cz);
+    V const t = scaled_t / det;
+    auto const hit = inside & (det != zero) & (t >= V(ray.tmin)) & (t <= V(ray.tmax));
+    h.mask = simd::movemask(hit);
+    if (h.mask == 0) return h;
+    t.store(h.t.data());
+    ev.store(h.ev.data());
+    ew.store(h.ew.data());
+    det.store(h.det.data());
+    return h;
 }
 
 // The lanes of b in `used` (a leaf's triangles) of a packet whose lanes share one shear
