@@ -40,9 +40,10 @@
 // How a packet is traced (canopy.bvh:traverse): its node test takes one child box at a time
 // against all lanes; its leaf test one triangle at a time, read straight from the leaf's block,
 // with the vertex components picked once for all lanes when they share one shear permutation
-// (canopy.geometry:triangle_block, intersect_lane); and with no hook or filter, lanes that reach
-// a node (or a leaf of instances) fewer than packet_lanes_alone_below at a time go on from there
-// as scalar rays.
+// (canopy.geometry:triangle_block, intersect_lane), or, with no filter and fewer lanes taking part
+// than the block has triangles, the whole block once per lane (intersect_block_by_lanes); and
+// with no hook or filter, lanes that reach a node (or a leaf of instances) fewer than
+// packet_lanes_alone_below at a time go on from there as scalar rays.
 //
 // Guarantees:
 // - Results are bit-identical to the single-ray queries (hit, t, u, v, prim_id, geom_id, inst_id,
