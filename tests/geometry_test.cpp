@@ -522,6 +522,17 @@ std::array<ray, 8> random_rays_for(random_source& rng, triangle const& tri) {
     return rays;
 }
 
+// A ray of a coherent packet: its direction's largest component along `axis` with `sign`
+// (|d[axis]| >= 1 > the others, so every such ray takes the same shear permutation), aimed at a
+// point around the target triangle from up to 20 directions away.
+ray coherent_ray_towards(random_source& rng, triangle const& target, int axis, float sign) {
+    vec3<float> d(rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f));
+    d[axis] = sign * rng.uniform(1.0f, 2.0f);
+    float const b1 = rng.uniform(-0.2f, 1.0f), b2 = rng.uniform(-0.2f, 1.0f - b1);
+    vec3<float> const p = target.v0 + (target.v1 - target.v0) * b1 + (target.v2 - target.v0) * b2;
+    return make_ray(p - d * rng.uniform(0.5f, 20.0f), d);
+}
+
 // The triangles of one block (case i), and the block: a random number of used lanes, some
 // triangles degenerate (a repeated vertex, or three collinear vertices), some sharing vertices
 // with the previous one.
@@ -878,13 +889,7 @@ TEST_CASE("packets whose lanes share one shear permutation test triangles and bl
         if (coherent) {
             int const axis = rng.integer(0, 2);
             float const sign = rng.integer(0, 1) == 0 ? 1.0f : -1.0f;
-            for (auto& r : rays) {
-                vec3<float> d(rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f));
-                d[axis] = sign * rng.uniform(1.0f, 2.0f);
-                float const b1 = rng.uniform(-0.2f, 1.0f), b2 = rng.uniform(-0.2f, 1.0f - b1);
-                vec3<float> const p = target.v0 + (target.v1 - target.v0) * b1 + (target.v2 - target.v0) * b2;
-                r = make_ray(p - d * rng.uniform(0.5f, 20.0f), d);
-            }
+            for (auto& r : rays) r = coherent_ray_towards(rng, target, axis, sign);
             if (rng.integer(0, 3) == 0) rays[5].tmin = quiet_nan; // an inactive lane
             if (rng.integer(0, 3) == 0) rays[6].tmax = rays[6].tmin - 1;
         } else {
@@ -932,11 +937,7 @@ TEST_CASE("a packet's block test lane by lane gives each lane the first and the 
         float const sign = rng.integer(0, 1) == 0 ? 1.0f : -1.0f;
         std::array<ray, 8> rays;
         for (auto& r : rays) {
-            vec3<float> d(rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f), rng.uniform(-0.9f, 0.9f));
-            d[axis] = sign * rng.uniform(1.0f, 2.0f);
-            float const b1 = rng.uniform(-0.2f, 1.0f), b2 = rng.uniform(-0.2f, 1.0f - b1);
-            vec3<float> const p = target.v0 + (target.v1 - target.v0) * b1 + (target.v2 - target.v0) * b2;
-            r = make_ray(p - d * rng.uniform(0.5f, 20.0f), d);
+            r = coherent_ray_towards(rng, target, axis, sign);
             if (rng.integer(0, 7) == 0) r.tmax = rng.uniform(0.0f, 10.0f); // some hits beyond tmax
         }
         canopy::prepared_ray<float8> packet(pack(rays));
