@@ -87,7 +87,10 @@ range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::s
 // centre in 4 lanes: the same arithmetic as bin_index, lane by lane (NaN and values below the
 // range in bin 0, values above it in the last bin). The one mapping from centre to bin of the
 // vector binning (bin_refs_vector) and the vector partition (partition_blocks), so that a
-// reference is partitioned by the bin it was counted in.
+// reference is partitioned by the bin it was counted in. Its members are declared inline: a
+// member of a non-template class in a named module is not implicitly inline, and always_inline
+// alone left them called out of line, every vector register spilled around each call
+// (docs/performance.md, Run 29).
 struct vector_bin_index {
     template <typename S>
     explicit vector_bin_index(centroid_bins<S> const& binning)
@@ -99,11 +102,11 @@ struct vector_bin_index {
     // reference's index (prim_ref::index) as float bits, a denormal, and arithmetic on denormals
     // takes a microcode assist on some processors (measured on an AMD Zen 5: 82 % of the binning's
     // time on that lane's multiply).
-    [[gnu::always_inline]] simd::float4 doubled_center(simd::float4 lo_, simd::float4 hi_) const {
+    [[gnu::always_inline]] inline simd::float4 doubled_center(simd::float4 lo_, simd::float4 hi_) const {
         return simd::select(xyz, lo_, simd::float4(0.0f)) + simd::select(xyz, hi_, simd::float4(0.0f));
     }
 
-    [[gnu::always_inline]] simd::int4 operator()(simd::float4 doubled_center) const {
+    [[gnu::always_inline]] inline simd::int4 operator()(simd::float4 doubled_center) const {
         // max(f, 0) takes 0 for NaN (the second operand), as bin_index does.
         return simd::convert_to_int(simd::min(simd::max((doubled_center - lo) * scale, simd::float4(0.0f)), last));
     }
@@ -375,28 +378,33 @@ std::size_t partition_blocks(prim_ref<S>* refs, centroid_bins<S> const& binning,
     int const axis = best.axis;
     float const inf = std::numeric_limits<float>::infinity();
     float4 left_lo(inf), left_hi(-inf), right_lo(inf), right_hi(-inf);
-    // 1 when ref goes left; its doubled centre joins that side's bounds (min and max with the
-    // bounds second: a NaN coordinate is ignored, as extend does).
-    auto const side = [&](prim_ref<S> const& ref) -> std::uint32_t {
-        float4 const c = bin_of.doubled_center(float4::load(&ref.lo.x), float4::load(&ref.hi.x));
-        std::uint32_t const goes = (simd::movemask(bin_of(c) < split) >> axis) & 1u;
-        auto const is_left = int4(std::int32_t(goes)) != int4(0);
-        left_lo = simd::min(simd::select(is_left, c, float4(inf)), left_lo);
-        left_hi = simd::max(simd::select(is_left, c, float4(-inf)), left_hi);
-        right_lo = simd::min(simd::select(is_left, float4(inf), c), right_lo);
-        right_hi = simd::max(simd::select(is_left, float4(-inf), c), right_hi);
-        return goes;
-    };
     // The offsets k (block[k * step]) of the block's references that belong on the other side
     // (belongs_left: 1 for the left block, 0 for the right one), in misplaced[0, count); returns
-    // count.
+    // count. Each reference's doubled centre joins its side's centroid bounds (min and max with
+    // the bounds second: a NaN coordinate is ignored, as extend does), gathered in the block's own
+    // vectors and merged once per block: the byte stores into misplaced may alias any object
+    // whose address is known, so bounds kept in the enclosing function's variables went through
+    // memory for every reference.
     auto const classify = [&](prim_ref<S> const* block, std::ptrdiff_t step, std::uint32_t belongs_left,
                               std::uint8_t* misplaced) {
+        float4 block_left_lo(inf), block_left_hi(-inf), block_right_lo(inf), block_right_hi(-inf);
         std::size_t count = 0;
         for (std::size_t k = 0; k < B; ++k) {
+            prim_ref<S> const& ref = block[std::ptrdiff_t(k) * step];
+            float4 const c = bin_of.doubled_center(float4::load(&ref.lo.x), float4::load(&ref.hi.x));
+            std::uint32_t const goes = (simd::movemask(bin_of(c) < split) >> axis) & 1u;
+            auto const is_left = int4(std::int32_t(goes)) != int4(0);
+            block_left_lo = simd::min(simd::select(is_left, c, float4(inf)), block_left_lo);
+            block_left_hi = simd::max(simd::select(is_left, c, float4(-inf)), block_left_hi);
+            block_right_lo = simd::min(simd::select(is_left, float4(inf), c), block_right_lo);
+            block_right_hi = simd::max(simd::select(is_left, float4(-inf), c), block_right_hi);
             misplaced[count] = std::uint8_t(k);
-            count += side(block[std::ptrdiff_t(k) * step]) ^ belongs_left;
+            count += goes ^ belongs_left;
         }
+        left_lo = simd::min(block_left_lo, left_lo);
+        left_hi = simd::max(block_left_hi, left_hi);
+        right_lo = simd::min(block_right_lo, right_lo);
+        right_hi = simd::max(block_right_hi, right_hi);
         return count;
     };
     std::uint8_t misplaced_left[B], misplaced_right[B]; // offsets in the left and right blocks
