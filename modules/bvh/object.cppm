@@ -38,7 +38,9 @@ namespace canopy::detail {
 // A primitive's box and its input index: what the builder partitions in place (Embree's PrimRef),
 // so that every pass over a node's primitives reads consecutive memory instead of gathering boxes
 // through an index array. 32 bytes for float: one box in two 4-lane loads (the index and the
-// padding ride in lane 3, which the binning ignores).
+// padding ride in lane 3, which the binning ignores). The index's bits read as a float are a
+// denormal: vector code takes lane 3 through minima, maxima, comparisons and blends only, or zeroes
+// it before arithmetic (vector_bin_index::doubled_center).
 template <typename S>
 struct prim_ref {
     vec3<S> lo;
