@@ -1099,6 +1099,69 @@ TEST_CASE("SAH drift after refits: counted against a fresh build, and the rebuil
     CHECK_FALSE(canopy::needs_rebuild(small, built));
 }
 
+// The spatial bins' planes (canopy.bvh:spatial, place_spatial_planes) and the bin a coordinate
+// falls in (plane_bin, one subtraction, one multiply and a clamp) must agree: x is in bin k exactly
+// when planes[k] ≤ x < planes[k + 1], found here by searching the planes. Checked on each plane,
+// the float below it and random coordinates, for nodes far from the origin, a few ulps wide and
+// wide enough to overflow; the planes stay within a few ulps of the equal intervals.
+TEST_CASE("spatial binning: a coordinate's bin is the one its planes bound, found without a search") {
+    random_source rng(2031);
+    int checked = 0, refused = 0;
+    for (int iteration = 0; iteration < 4000; ++iteration) {
+        int const bins = std::array{2, 3, 8, 16, 64}[std::size_t(iteration % 5)];
+        float const magnitude = std::array{1.0f, 1e3f, 1e6f, 3e7f, 1e30f}[std::size_t((iteration / 5) % 5)];
+        float lo = rng.uniform(-magnitude, magnitude), hi = 0.0f;
+        switch ((iteration / 25) % 4) {
+        case 0: hi = lo + rng.uniform(0.0f, 2.0f * magnitude); break;             // a box of the scene's size
+        case 1: hi = lo + rng.uniform(0.0f, 1e-3f) * std::abs(lo); break;         // small against its distance
+        case 2: hi = std::nextafter(std::nextafter(lo, INFINITY), INFINITY); break; // two ulps wide
+        default:                                                                    // wider than a float holds
+            lo = -0.75f * std::numeric_limits<float>::max();
+            hi = rng.uniform(0.5f, 1.0f) * std::numeric_limits<float>::max();
+        }
+        if (!(hi > lo)) continue;
+        std::vector<float> planes(std::size_t(bins) + 1);
+        float const scale = canopy::detail::place_spatial_planes(lo, hi, bins, planes.data());
+        if (scale == 0.0f) {
+            // Refused only where the planes cannot follow the bins: a width that overflows.
+            INFO("bins " << bins << ", [" << lo << ", " << hi << "]");
+            CHECK_FALSE(std::isfinite(hi - lo));
+            ++refused;
+            continue;
+        }
+        REQUIRE(planes.front() == lo);
+        REQUIRE(planes.back() == hi);
+        double const ulp = double(std::nextafter(std::max(std::abs(lo), std::abs(hi)), INFINITY)) -
+                           double(std::max(std::abs(lo), std::abs(hi)));
+        for (int k = 1; k < bins; ++k) {
+            double const even = double(lo) + (double(hi) - double(lo)) * k / bins;
+            INFO("bins " << bins << ", [" << lo << ", " << hi << "], plane " << k);
+            CHECK(planes[std::size_t(k)] >= planes[std::size_t(k) - 1]);
+            CHECK(std::abs(double(planes[std::size_t(k)]) - even) <= 4.0 * ulp);
+        }
+        auto const bin_by_search = [&](float x) {
+            int k = 0;
+            while (k + 1 < bins && x >= planes[std::size_t(k) + 1]) ++k;
+            return k;
+        };
+        std::vector<float> xs;
+        for (float const p : planes) {
+            xs.push_back(p);
+            xs.push_back(std::nextafter(p, -INFINITY));
+            xs.push_back(std::nextafter(p, INFINITY));
+        }
+        for (int i = 0; i < 8; ++i) xs.push_back(float(rng.uniform_double(double(lo), double(hi))));
+        for (float const x : xs) {
+            if (x < lo || x > hi) continue;
+            INFO("bins " << bins << ", [" << lo << ", " << hi << "], x " << x);
+            CHECK(canopy::detail::plane_bin(x, planes.data(), bins, scale) == bin_by_search(x));
+            ++checked;
+        }
+    }
+    CHECK(checked > 50000);
+    CHECK(refused > 0);
+}
+
 // The spatial splits' binning clips a reference that spans several bins into one part per bin
 // (canopy.bvh:spatial): the 4-lane sweep, with its own path for two bins, must give the boxes of
 // the scalar clipping, bin by bin. Random triangles, needles among them, references clipped to

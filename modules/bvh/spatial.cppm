@@ -167,7 +167,7 @@ struct spatial_scratch {
     explicit spatial_scratch(int bins)
         : object(bins), boxes(3 * std::size_t(bins)), enter(3 * std::size_t(bins)), exit(3 * std::size_t(bins)),
           planes(3 * (std::size_t(bins) + 1)), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)),
-          parts(std::size_t(bins)), vector_boxes(std::size_t(bins)) {}
+          parts(std::size_t(bins)), vector_boxes(3 * std::size_t(bins)) {}
     bin_scratch<S> object;
     std::vector<basic_aabb<S>> boxes;
     std::vector<std::size_t> enter, exit;
@@ -175,7 +175,7 @@ struct spatial_scratch {
     std::vector<basic_aabb<S>> right_boxes;
     std::vector<std::size_t> right_counts;
     std::vector<basic_aabb<S>> parts; // one reference's parts, bin by bin (bin_reference_parts)
-    std::vector<vector_bin> vector_boxes; // the bins' boxes with vector_binning
+    std::vector<vector_bin> vector_boxes; // the three axes' bins' boxes with vector_binning
     std::vector<prim_ref<S>> left, right;
 };
 
@@ -195,24 +195,69 @@ struct spatial_choice {
 // The spatial binning of one reference, exported for the tests that compare its two forms.
 export namespace canopy::detail {
 
+// A float's rank in the order of the floats, as an unsigned integer, and the float of a rank: the
+// steps of place_spatial_planes' search (-0 and +0 are neighbours).
+template <typename S>
+auto float_rank(S x) {
+    using U = std::conditional_t<sizeof(S) == 4, std::uint32_t, std::uint64_t>;
+    U const u = std::bit_cast<U>(x), sign = U(1) << (8 * sizeof(S) - 1);
+    return (u & sign) ? U(~u) : U(u | sign);
+}
+template <typename S, typename U>
+S float_of_rank(U rank) {
+    U const sign = U(1) << (8 * sizeof(S) - 1);
+    return std::bit_cast<S>((rank & sign) ? U(rank & ~sign) : U(~rank));
+}
+
 // The bins + 1 planes of spatial bins that split [lo, hi] (lo < hi) into equal parts, and the
-// scale that maps a coordinate to its bin estimate (bin_index).
+// scale that maps a coordinate to its bin: bin_index(x, lo, scale, bins), exactly. Each inner
+// plane k is the least float whose bin_index is k or more (bin_index is monotonic), searched from
+// the equal interval's value by steps doubling in rank, then bisection: one or two evaluations
+// mostly, at most twice the float's bits. A coordinate's bin among the planes (plane_bin) is then
+// one subtraction, one multiply and a clamp, in vectors too (bin_spatial). Returns 0 (no planes:
+// the axis makes no spatial split) where the scale is not finite and positive: a width that
+// overflows, or one too small for its reciprocal.
 template <typename S>
 S place_spatial_planes(S lo, S hi, int bins, S* planes) {
     auto const b = std::size_t(bins);
-    for (std::size_t k = 0; k < b; ++k)
-        planes[k] = S(double(lo) + (double(hi) - double(lo)) * double(k) / double(bins));
+    S const scale = S(bins) / (hi - lo);
+    if (!(scale > S(0) && scale < std::numeric_limits<S>::infinity())) return S(0);
+    planes[0] = lo;
     planes[b] = hi;
-    return S(bins) / (hi - lo);
+    auto const below = [&](auto rank, int k) { return bin_index(float_of_rank<S>(rank), lo, scale, bins) < k; };
+    auto const lowest = float_rank(lo), highest = float_rank(hi);
+    for (std::size_t k = 1; k < b; ++k) {
+        // Ranks a < c with bin_index(a) < k ≤ bin_index(c) (lo's bin is 0, hi's is bins - 1).
+        S const even = std::clamp(S(double(lo) + (double(hi) - double(lo)) * double(k) / double(bins)), lo, hi);
+        auto a = float_rank(even), c = a;
+        decltype(a) step = 1;
+        if (below(a, int(k))) {
+            do {
+                a = c;
+                c = highest - a > step ? a + step : highest;
+                step *= 2;
+            } while (below(c, int(k)));
+        } else {
+            do {
+                c = a;
+                a = a - lowest > step ? c - step : lowest;
+                step *= 2;
+            } while (!below(a, int(k)));
+        }
+        while (c - a > 1) {
+            auto const m = a + (c - a) / 2;
+            (below(m, int(k)) ? a : c) = m;
+        }
+        planes[k] = float_of_rank<S>(c);
+    }
+    return scale;
 }
 
-// The bin k of x among the planes (planes[k] ≤ x < planes[k + 1]; clamped to [0, bins)).
+// The bin k of x among the planes of place_spatial_planes (planes[k] ≤ x < planes[k + 1];
+// clamped to [0, bins)): bin_index, which those planes follow exactly.
 template <typename S>
 int plane_bin(S x, S const* planes, int bins, S scale) {
-    int k = bin_index(x, planes[0], scale, bins);
-    while (k > 0 && x < planes[k]) --k;
-    while (k + 1 < bins && x >= planes[k + 1]) ++k;
-    return k;
+    return bin_index(x, planes[0], scale, bins);
 }
 
 // Adds to boxes[first..last] the parts of one reference that spans those bins along `axis`: bin k
@@ -350,11 +395,10 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
     }
 }
 
-// The last bin of a reference whose first bin is `first` and whose highest coordinate is hi: its
-// first bin when hi is below that bin's upper plane (plane_bin is monotonic), without a search.
+// The last bin of a reference whose first bin is `first` and whose highest coordinate is hi.
 template <typename S>
 int last_plane_bin(S hi, int first, S const* planes, int bins, S scale) {
-    return hi < planes[first + 1] ? first : plane_bin(hi, planes, bins, scale);
+    return std::max(first, plane_bin(hi, planes, bins, scale));
 }
 
 } // namespace canopy::detail
@@ -384,64 +428,102 @@ bool chop_reference(prim_ref<S> const& r, int axis, vec3<S> const& chop_extent) 
     return r.hi[b] - r.lo[b] <= chop_extent[b] && r.hi[c] - r.lo[c] <= chop_extent[c];
 }
 
-// Adds the spatial bins of refs along `axis` (bins between `planes`) to boxes, enter and exit:
-// each bin's box grows by the parts of the references in it, enter / exit count the references
-// whose first / last bin it is (chop_reference: by its box cut to each bin's slab, or by its
-// triangle's clipped parts). vector_boxes, parts: `bins` entries of scratch.
+// A node's spatial planes on its three axes: axis a's bins + 1 planes at planes + a · (bins + 1)
+// and their scale (place_spatial_planes), whether the node's box has a width along it to split
+// (usable), and the widest reference box chopped across it (chop_reference).
+template <typename S>
+struct spatial_axes {
+    S const* planes = nullptr;
+    int bins = 0;
+    bool usable[3] = {};
+    S scale[3] = {};
+    vec3<S> chop_extent;
+};
+
+// Adds the spatial bins of refs along the usable axes to boxes, enter and exit (axis a's at
+// a · bins): each bin's box grows by the parts of the references in it, enter / exit count the
+// references whose first / last bin it is (chop_reference: by its box cut to each bin's slab, or
+// by its triangle's clipped parts). One pass over the references bins all three axes: each is
+// loaded once, and the axes' independent work overlaps. vector_boxes: 3 · bins entries of
+// scratch, parts: bins.
 template <typename Prim, typename S>
-void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> refs, int axis, S const* planes,
-                 int bins, S scale, vec3<S> const& chop_extent, basic_aabb<S>* boxes, std::size_t* enter,
-                 std::size_t* exit, vector_bin* vector_boxes, basic_aabb<S>* parts) {
+void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> refs, spatial_axes<S> const& axes,
+                 basic_aabb<S>* boxes, std::size_t* enter, std::size_t* exit, vector_bin* vector_boxes,
+                 basic_aabb<S>* parts) {
+    int const bins = axes.bins;
+    auto const b = std::size_t(bins);
     if constexpr (vector_binning<S>) {
         using simd::float4;
         float const inf = std::numeric_limits<float>::infinity();
-        for (int k = 0; k < bins; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
+        for (std::size_t k = 0; k < 3 * b; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
+        // plane_bin of the three axes in lanes: the same subtraction, multiply and clamp.
+        auto const xyz = float4::iota() < float4(3.0f);
+        float4 const origin(to_lanes(vec3<float>(axes.planes[0], axes.planes[b + 1], axes.planes[2 * (b + 1)])));
+        float4 const scale(to_lanes(vec3<float>(axes.scale[0], axes.scale[1], axes.scale[2])));
+        float4 const last_bin(float(bins - 1));
+        auto const bins_of = [&](float4 const& x) {
+            return simd::convert_to_int(simd::min(simd::max((x - origin) * scale, float4(0.0f)), last_bin));
+        };
+        alignas(16) std::int32_t firsts[4], lasts[4];
         for (auto const& r : refs) {
-            int const first = plane_bin(r.lo[axis], planes, bins, scale);
-            int const last = last_plane_bin(r.hi[axis], first, planes, bins, scale);
-            ++enter[first];
-            ++exit[last];
-            // Lane 3 holds the index or the padding: ignored.
+            // Lane 3 holds the index or the padding: taken only by min, max and select.
             vector_bin const box{float4::load(&r.lo.x), float4::load(&r.hi.x)};
-            if (first == last) {
-                vector_boxes[first].lo = simd::min(box.lo, vector_boxes[first].lo);
-                vector_boxes[first].hi = simd::max(box.hi, vector_boxes[first].hi);
-                continue;
-            }
-            if (chop_reference(r, axis, chop_extent)) {
-                auto const on_axis = float4::iota() == float4(float(axis));
-                for (int k = first; k <= last; ++k) {
-                    float4 const lo = k == first ? box.lo : simd::select(on_axis, float4(planes[k]), box.lo);
-                    float4 const hi = k == last ? box.hi : simd::select(on_axis, float4(planes[k + 1]), box.hi);
-                    vector_boxes[k].lo = simd::min(lo, vector_boxes[k].lo);
-                    vector_boxes[k].hi = simd::max(hi, vector_boxes[k].hi);
+            bins_of(simd::select(xyz, box.lo, float4(0.0f))).store_aligned(firsts);
+            bins_of(simd::select(xyz, box.hi, float4(0.0f))).store_aligned(lasts);
+            for (int axis = 0; axis < 3; ++axis) {
+                if (!axes.usable[axis]) continue;
+                S const* const planes = axes.planes + std::size_t(axis) * (b + 1);
+                std::size_t const at = std::size_t(axis) * b;
+                vector_bin* const axis_boxes = vector_boxes + at;
+                int const first = firsts[axis];
+                int const last = std::max(first, int(lasts[axis]));
+                ++enter[at + std::size_t(first)];
+                ++exit[at + std::size_t(last)];
+                if (first == last) {
+                    axis_boxes[first].lo = simd::min(box.lo, axis_boxes[first].lo);
+                    axis_boxes[first].hi = simd::max(box.hi, axis_boxes[first].hi);
+                } else if (chop_reference(r, axis, axes.chop_extent)) {
+                    auto const on_axis = float4::iota() == float4(float(axis));
+                    for (int k = first; k <= last; ++k) {
+                        float4 const lo = k == first ? box.lo : simd::select(on_axis, float4(planes[k]), box.lo);
+                        float4 const hi = k == last ? box.hi : simd::select(on_axis, float4(planes[k + 1]), box.hi);
+                        axis_boxes[k].lo = simd::min(lo, axis_boxes[k].lo);
+                        axis_boxes[k].hi = simd::max(hi, axis_boxes[k].hi);
+                    }
+                } else {
+                    bin_reference_parts_vector(ctx.prims[r.index], box, axis, planes, bins, axes.scale[axis], first,
+                                               last, axis_boxes);
                 }
-                continue;
             }
-            bin_reference_parts_vector(ctx.prims[r.index], box, axis, planes, bins, scale, first, last, vector_boxes);
         }
-        for (int k = 0; k < bins; ++k)
+        for (std::size_t k = 0; k < 3 * b; ++k)
             boxes[k] = extend(boxes[k], basic_aabb<S>{from_lanes(vector_boxes[k].lo), from_lanes(vector_boxes[k].hi)});
     } else {
+        (void)vector_boxes;
         for (auto const& r : refs) {
-            int const first = plane_bin(r.lo[axis], planes, bins, scale);
-            int const last = last_plane_bin(r.hi[axis], first, planes, bins, scale);
-            ++enter[first];
-            ++exit[last];
-            if (first == last) {
-                boxes[first] = extend(boxes[first], r.box());
-                continue;
-            }
-            if (chop_reference(r, axis, chop_extent)) {
-                for (int k = first; k <= last; ++k) {
-                    basic_aabb<S> part = r.box();
-                    if (k > first) part.min[axis] = planes[k];
-                    if (k < last) part.max[axis] = planes[k + 1];
-                    boxes[k] = extend(boxes[k], part);
+            for (int axis = 0; axis < 3; ++axis) {
+                if (!axes.usable[axis]) continue;
+                S const* const planes = axes.planes + std::size_t(axis) * (b + 1);
+                std::size_t const at = std::size_t(axis) * b;
+                basic_aabb<S>* const axis_boxes = boxes + at;
+                int const first = plane_bin(r.lo[axis], planes, bins, axes.scale[axis]);
+                int const last = last_plane_bin(r.hi[axis], first, planes, bins, axes.scale[axis]);
+                ++enter[at + std::size_t(first)];
+                ++exit[at + std::size_t(last)];
+                if (first == last) {
+                    axis_boxes[first] = extend(axis_boxes[first], r.box());
+                } else if (chop_reference(r, axis, axes.chop_extent)) {
+                    for (int k = first; k <= last; ++k) {
+                        basic_aabb<S> part = r.box();
+                        if (k > first) part.min[axis] = planes[k];
+                        if (k < last) part.max[axis] = planes[k + 1];
+                        axis_boxes[k] = extend(axis_boxes[k], part);
+                    }
+                } else {
+                    bin_reference_parts(ctx.prims[r.index], r.box(), axis, planes, bins, axes.scale[axis], first, last,
+                                        axis_boxes, parts);
                 }
-                continue;
             }
-            bin_reference_parts(ctx.prims[r.index], r.box(), axis, planes, bins, scale, first, last, boxes, parts);
         }
     }
 }
@@ -454,45 +536,37 @@ template <typename Prim, typename S>
 spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_scratch<S>& scratch,
                                      std::span<prim_ref<S> const> refs, basic_aabb<S> const& bounds, int bins) {
     auto const b = std::size_t(bins);
-    bool usable[3] = {};
-    S scale[3] = {};
+    spatial_axes<S> axes;
+    axes.planes = scratch.planes.data();
+    axes.bins = bins;
+    bool const* const usable = axes.usable;
     for (int axis = 0; axis < 3; ++axis) {
         S const lo = bounds.min[axis], hi = bounds.max[axis];
-        usable[axis] = hi > lo;
-        if (!usable[axis]) continue;
-        scale[axis] = place_spatial_planes(lo, hi, bins, scratch.planes.data() + std::size_t(axis) * (b + 1));
+        axes.chop_extent[axis] = S(double(hi - lo) / double(bins) * chopped_extent_in_bins);
+        scratch.planes[std::size_t(axis) * (b + 1)] = lo; // the vector bins' origin, of unused axes too
+        if (!(hi > lo)) continue;
+        axes.scale[axis] = place_spatial_planes(lo, hi, bins, scratch.planes.data() + std::size_t(axis) * (b + 1));
+        axes.usable[axis] = axes.scale[axis] > S(0);
     }
-    vec3<S> chop_extent;
-    for (int axis = 0; axis < 3; ++axis)
-        chop_extent[axis] = S(double(bounds.max[axis] - bounds.min[axis]) / double(bins) * chopped_extent_in_bins);
     std::fill(scratch.boxes.begin(), scratch.boxes.end(), basic_aabb<S>{});
     std::fill(scratch.enter.begin(), scratch.enter.end(), std::size_t(0));
     std::fill(scratch.exit.begin(), scratch.exit.end(), std::size_t(0));
     std::size_t const threshold = ctx.object.options.parallel_threshold;
     std::size_t const chunk = bin_chunk(threshold, refs.size());
     if (!bins_in_parallel(threshold, refs.size())) {
-        for (int axis = 0; axis < 3; ++axis) {
-            if (!usable[axis]) continue;
-            std::size_t const at = std::size_t(axis) * b;
-            bin_spatial(ctx, refs, axis, scratch.planes.data() + std::size_t(axis) * (b + 1), bins, scale[axis],
-                        chop_extent, scratch.boxes.data() + at, scratch.enter.data() + at, scratch.exit.data() + at,
-                        scratch.vector_boxes.data(), scratch.parts.data());
-        }
+        bin_spatial(ctx, refs, axes, scratch.boxes.data(), scratch.enter.data(), scratch.exit.data(),
+                    scratch.vector_boxes.data(), scratch.parts.data());
     } else {
         std::size_t const chunks = (refs.size() + chunk - 1) / chunk;
         std::vector<basic_aabb<S>> boxes(chunks * 3 * b);
         std::vector<std::size_t> enter(chunks * 3 * b), exit(chunks * 3 * b);
-        parallel_for_chunks(chunks * 3, 1, [&](std::size_t first, std::size_t last) {
-            std::vector<vector_bin> vector_boxes(b);
+        parallel_for_chunks(chunks, 1, [&](std::size_t first, std::size_t last) {
+            std::vector<vector_bin> vector_boxes(3 * b);
             std::vector<basic_aabb<S>> parts(b);
-            for (std::size_t t = first; t < last; ++t) {
-                auto const axis = int(t % 3);
-                if (!usable[axis]) continue;
-                std::size_t const begin = (t / 3) * chunk;
-                bin_spatial(ctx, refs.subspan(begin, std::min(chunk, refs.size() - begin)), axis,
-                            scratch.planes.data() + std::size_t(axis) * (b + 1), bins, scale[axis], chop_extent,
-                            boxes.data() + t * b, enter.data() + t * b, exit.data() + t * b, vector_boxes.data(),
-                            parts.data());
+            for (std::size_t c = first; c < last; ++c) {
+                std::size_t const begin = c * chunk, at = c * 3 * b;
+                bin_spatial(ctx, refs.subspan(begin, std::min(chunk, refs.size() - begin)), axes, boxes.data() + at,
+                            enter.data() + at, exit.data() + at, vector_boxes.data(), parts.data());
             }
         });
         for (std::size_t c = 0; c < chunks; ++c)
@@ -607,6 +681,43 @@ double trimming_gain(basic_aabb<S> const& left, basic_aabb<S> const& right, int 
     return std::max(gain(left, true), gain(right, false));
 }
 
+// Adds to range the bounds of refs and of their doubled centres; whether every coordinate of
+// refs is finite (a node holding any other makes object splits only). With vector_binning, in
+// vectors, the same bounds as canopy.math's extend lane by lane: lane 3 of a reference's first row
+// (its index, whose bits are a denormal) is taken only by minima, maxima and comparisons, and
+// zeroed before the centre's sum.
+template <typename S>
+bool spatial_range(std::span<prim_ref<S> const> refs, range_bounds<S>& range) {
+    if constexpr (vector_binning<S>) {
+        using simd::float4;
+        float const inf = std::numeric_limits<float>::infinity();
+        vector_bin bounds{to_lanes(range.bounds.min), to_lanes(range.bounds.max)};
+        vector_bin centroids{to_lanes(range.centroids.min), to_lanes(range.centroids.max)};
+        auto const xyz = float4::iota() < float4(3.0f);
+        auto finite = xyz;
+        for (auto const& r : refs) {
+            float4 const lo = float4::load(&r.lo.x), hi = float4::load(&r.hi.x);
+            bounds.lo = simd::min(lo, bounds.lo);
+            bounds.hi = simd::max(hi, bounds.hi);
+            float4 const center = simd::select(xyz, lo, float4(0.0f)) + simd::select(xyz, hi, float4(0.0f));
+            centroids.lo = simd::min(center, centroids.lo);
+            centroids.hi = simd::max(center, centroids.hi);
+            finite = finite & (simd::abs(lo) < float4(inf)) & (simd::abs(hi) < float4(inf));
+        }
+        range.bounds = {from_lanes(bounds.lo), from_lanes(bounds.hi)};
+        range.centroids = {from_lanes(centroids.lo), from_lanes(centroids.hi)};
+        return (simd::movemask(finite) & 7u) == 7u;
+    } else {
+        bool finite = true;
+        for (auto const& r : refs) {
+            range.bounds = extend(range.bounds, r.box());
+            range.centroids = extend(range.centroids, r.doubled_center());
+            for (int c = 0; c < 3; ++c) finite = finite && std::isfinite(r.lo[c]) && std::isfinite(r.hi[c]);
+        }
+        return finite;
+    }
+}
+
 // Builds the subtree of the `count` references at refs[begin] into nodes[node_index], adding at
 // most `budget` references (the slack after them). Where the budget is spent, the rest of the
 // subtree is canopy.bvh:object's (build_node, the same object splits, in place).
@@ -618,12 +729,7 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
     auto const& opt = object.options;
     std::span<prim_ref<S> const> const refs(object.refs.data() + begin, count);
     range_bounds<S> range;
-    bool finite = true;
-    for (auto const& r : refs) {
-        range.bounds = extend(range.bounds, r.box());
-        range.centroids = extend(range.centroids, r.doubled_center());
-        for (int c = 0; c < 3; ++c) finite = finite && std::isfinite(r.lo[c]) && std::isfinite(r.hi[c]);
-    }
+    bool const finite = spatial_range(refs, range);
     if (budget == 0) return build_node(object, scratch.object, node_index, begin, begin + count, depth, range);
     nodes[node_index].bounds = range.bounds;
 
