@@ -96,16 +96,25 @@ range_bounds<S> bounds_of(build_context<S> const& ctx, std::size_t begin, std::s
 struct vector_bin_index {
     template <typename S>
     explicit vector_bin_index(centroid_bins<S> const& binning)
-        : lo(to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2]))),
-          scale(to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2]))),
-          last(float(binning.bins - 1)) {}
+        : vector_bin_index(to_lanes(vec3<float>(binning.lo[0], binning.lo[1], binning.lo[2])),
+                           to_lanes(vec3<float>(binning.scale[0], binning.scale[1], binning.scale[2])),
+                           binning.bins) {}
 
-    // lo + hi of a reference loaded as two 4-lane vectors, lane 3 zero: that lane holds the
-    // reference's index (prim_ref::index) as float bits, a denormal, and arithmetic on denormals
-    // takes a microcode assist on some processors (on an AMD Zen 5 the bin mapping had a third of
-    // the bunny's build time, 82 % of it on the instruction after its multiply).
-    [[gnu::always_inline]] inline simd::float4 doubled_center(simd::float4 lo_, simd::float4 hi_) const {
-        return simd::select(xyz, lo_, simd::float4(0.0f)) + simd::select(xyz, hi_, simd::float4(0.0f));
+    // Bins of width 1 / scale from origin, per lane (canopy.bvh:spatial's planes, plane_bin).
+    vector_bin_index(simd::float4 origin, simd::float4 scale_, int bins)
+        : lo(origin), scale(scale_), last(float(bins - 1)) {}
+
+    // v with lane 3 zero: that lane of a reference loaded as two 4-lane vectors holds its index
+    // (prim_ref::index) as float bits, a denormal, and arithmetic on denormals takes a microcode
+    // assist on some processors (on an AMD Zen 5 the bin mapping had a third of the bunny's build
+    // time, 82 % of it on the instruction after its multiply).
+    [[gnu::always_inline]] static inline simd::float4 xyz_only(simd::float4 v) {
+        return simd::select(simd::int4::iota() < simd::int4(3), v, simd::float4(0.0f));
+    }
+
+    // lo + hi of a reference loaded as two 4-lane vectors, lane 3 zero (xyz_only).
+    [[gnu::always_inline]] static inline simd::float4 doubled_center(simd::float4 lo_, simd::float4 hi_) {
+        return xyz_only(lo_) + xyz_only(hi_);
     }
 
     [[gnu::always_inline]] inline simd::int4 operator()(simd::float4 doubled_center) const {
@@ -114,7 +123,6 @@ struct vector_bin_index {
     }
 
     simd::float4 lo, scale, last;
-    simd::mask4 xyz = simd::int4::iota() < simd::int4(3);
 };
 
 // The vector form of bin_refs below, into the 3 · binning.bins bins and counts given.

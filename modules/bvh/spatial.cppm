@@ -457,19 +457,15 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
         float const inf = std::numeric_limits<float>::infinity();
         for (std::size_t k = 0; k < 3 * b; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
         // plane_bin of the three axes in lanes: the same subtraction, multiply and clamp.
-        auto const xyz = float4::iota() < float4(3.0f);
-        float4 const origin(to_lanes(vec3<float>(axes.planes[0], axes.planes[b + 1], axes.planes[2 * (b + 1)])));
-        float4 const scale(to_lanes(vec3<float>(axes.scale[0], axes.scale[1], axes.scale[2])));
-        float4 const last_bin(float(bins - 1));
-        auto const bins_of = [&](float4 const& x) {
-            return simd::convert_to_int(simd::min(simd::max((x - origin) * scale, float4(0.0f)), last_bin));
-        };
+        vector_bin_index const bins_of(
+            to_lanes(vec3<float>(axes.planes[0], axes.planes[b + 1], axes.planes[2 * (b + 1)])),
+            to_lanes(vec3<float>(axes.scale[0], axes.scale[1], axes.scale[2])), bins);
         alignas(16) std::int32_t firsts[4], lasts[4];
         for (auto const& r : refs) {
             // Lane 3 holds the index or the padding: taken only by min, max and select.
             vector_bin const box{float4::load(&r.lo.x), float4::load(&r.hi.x)};
-            bins_of(simd::select(xyz, box.lo, float4(0.0f))).store_aligned(firsts);
-            bins_of(simd::select(xyz, box.hi, float4(0.0f))).store_aligned(lasts);
+            bins_of(vector_bin_index::xyz_only(box.lo)).store_aligned(firsts);
+            bins_of(vector_bin_index::xyz_only(box.hi)).store_aligned(lasts);
             for (int axis = 0; axis < 3; ++axis) {
                 if (!axes.usable[axis]) continue;
                 S const* const planes = axes.planes + std::size_t(axis) * (b + 1);
@@ -699,7 +695,7 @@ bool spatial_range(std::span<prim_ref<S> const> refs, range_bounds<S>& range) {
             float4 const lo = float4::load(&r.lo.x), hi = float4::load(&r.hi.x);
             bounds.lo = simd::min(lo, bounds.lo);
             bounds.hi = simd::max(hi, bounds.hi);
-            float4 const center = simd::select(xyz, lo, float4(0.0f)) + simd::select(xyz, hi, float4(0.0f));
+            float4 const center = vector_bin_index::doubled_center(lo, hi);
             centroids.lo = simd::min(center, centroids.lo);
             centroids.hi = simd::max(center, centroids.hi);
             finite = finite & (simd::abs(lo) < float4(inf)) & (simd::abs(hi) < float4(inf));
