@@ -167,7 +167,7 @@ struct spatial_scratch {
     explicit spatial_scratch(int bins)
         : object(bins), boxes(3 * std::size_t(bins)), enter(3 * std::size_t(bins)), exit(3 * std::size_t(bins)),
           planes(3 * (std::size_t(bins) + 1)), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)),
-          parts(std::size_t(bins)), vector_boxes(3 * std::size_t(bins)) {}
+          parts(std::size_t(bins)), vector_boxes(6 * std::size_t(bins)) {}
     bin_scratch<S> object;
     std::vector<basic_aabb<S>> boxes;
     std::vector<std::size_t> enter, exit;
@@ -175,7 +175,7 @@ struct spatial_scratch {
     std::vector<basic_aabb<S>> right_boxes;
     std::vector<std::size_t> right_counts;
     std::vector<basic_aabb<S>> parts; // one reference's parts, bin by bin (bin_reference_parts)
-    std::vector<vector_bin> vector_boxes; // the three axes' bins' boxes with vector_binning
+    std::vector<vector_bin> vector_boxes; // the three axes' bins' boxes with vector_binning, twice (bin_spatial)
     std::vector<prim_ref<S>> left, right;
 };
 
@@ -444,7 +444,7 @@ struct spatial_axes {
 // a · bins): each bin's box grows by the parts of the references in it, enter / exit count the
 // references whose first / last bin it is (chop_reference: by its box cut to each bin's slab, or
 // by its triangle's clipped parts). One pass over the references bins all three axes: each is
-// loaded once, and the axes' independent work overlaps. vector_boxes: 3 · bins entries of
+// loaded once, and the axes' independent work overlaps. vector_boxes: 6 · bins entries of
 // scratch, parts: bins.
 template <typename Prim, typename S>
 void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> refs, spatial_axes<S> const& axes,
@@ -455,45 +455,66 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
     if constexpr (vector_binning<S>) {
         using simd::float4;
         float const inf = std::numeric_limits<float>::infinity();
-        for (std::size_t k = 0; k < 3 * b; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
+        // A reference's first bin on each axis takes its part there (and any middle bins theirs)
+        // in vector_boxes[0, 3 · bins), its last bin its part there in vector_boxes[3 · bins,
+        // 6 · bins): both without a branch on whether they are the same bin (then both take the
+        // whole box), merged after the pass. Only the references clipped to their triangle
+        // (chop_reference) take a branch.
+        for (std::size_t k = 0; k < 6 * b; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
         // plane_bin of the three axes in lanes: the same subtraction, multiply and clamp.
         vector_bin_index const bins_of(
             to_lanes(vec3<float>(axes.planes[0], axes.planes[b + 1], axes.planes[2 * (b + 1)])),
             to_lanes(vec3<float>(axes.scale[0], axes.scale[1], axes.scale[2])), bins);
+        // chop_reference of the three axes: lane a of the box's width within chop_extent.
+        float4 const chop_extent(to_lanes(axes.chop_extent));
+        auto const bin_axis = [&]<int axis>(prim_ref<S> const& r, vector_bin const& box, int first, int last,
+                                            unsigned narrow) {
+            S const* const planes = axes.planes + std::size_t(axis) * (b + 1);
+            std::size_t const at = std::size_t(axis) * b;
+            ++enter[at + std::size_t(first)];
+            ++exit[at + std::size_t(last)];
+            vector_bin* const axis_boxes = vector_boxes + at;
+            constexpr unsigned others = 7u & ~(1u << axis);
+            auto const on_axis = float4::iota() == float4(float(axis));
+            if (first == last || (narrow & others) == others) {
+                // The parts in the first and the last bin: the box cut at the planes between.
+                bool const spans = last > first;
+                float const first_hi = spans ? planes[first + 1] : r.hi[axis];
+                float const last_lo = spans ? planes[last] : r.lo[axis];
+                grow_bin(axis_boxes[first], box.lo, simd::select(on_axis, float4(first_hi), box.hi));
+                grow_bin(axis_boxes[3 * b + std::size_t(last)], simd::select(on_axis, float4(last_lo), box.lo), box.hi);
+                for (int k = first + 1; k < last; ++k)
+                    grow_bin(axis_boxes[k], simd::select(on_axis, float4(planes[k]), box.lo),
+                             simd::select(on_axis, float4(planes[k + 1]), box.hi));
+            } else {
+                bin_reference_parts_vector(ctx.prims[r.index], box, axis, planes, bins, axes.scale[axis], first, last,
+                                           axis_boxes);
+            }
+        };
+        bool const all_usable = axes.usable[0] && axes.usable[1] && axes.usable[2];
         alignas(16) std::int32_t firsts[4], lasts[4];
         for (auto const& r : refs) {
-            // Lane 3 holds the index or the padding: taken only by min, max and select.
+            // Lane 3 holds the index or the padding: taken only by min, max and select, or zeroed.
             vector_bin const box{float4::load(&r.lo.x), float4::load(&r.hi.x)};
-            bins_of(vector_bin_index::xyz_only(box.lo)).store_aligned(firsts);
-            bins_of(vector_bin_index::xyz_only(box.hi)).store_aligned(lasts);
-            for (int axis = 0; axis < 3; ++axis) {
-                if (!axes.usable[axis]) continue;
-                S const* const planes = axes.planes + std::size_t(axis) * (b + 1);
-                std::size_t const at = std::size_t(axis) * b;
-                vector_bin* const axis_boxes = vector_boxes + at;
-                int const first = firsts[axis];
-                int const last = std::max(first, int(lasts[axis]));
-                ++enter[at + std::size_t(first)];
-                ++exit[at + std::size_t(last)];
-                if (first == last) {
-                    axis_boxes[first].lo = simd::min(box.lo, axis_boxes[first].lo);
-                    axis_boxes[first].hi = simd::max(box.hi, axis_boxes[first].hi);
-                } else if (chop_reference(r, axis, axes.chop_extent)) {
-                    auto const on_axis = float4::iota() == float4(float(axis));
-                    for (int k = first; k <= last; ++k) {
-                        float4 const lo = k == first ? box.lo : simd::select(on_axis, float4(planes[k]), box.lo);
-                        float4 const hi = k == last ? box.hi : simd::select(on_axis, float4(planes[k + 1]), box.hi);
-                        axis_boxes[k].lo = simd::min(lo, axis_boxes[k].lo);
-                        axis_boxes[k].hi = simd::max(hi, axis_boxes[k].hi);
-                    }
-                } else {
-                    bin_reference_parts_vector(ctx.prims[r.index], box, axis, planes, bins, axes.scale[axis], first,
-                                               last, axis_boxes);
-                }
-            }
+            float4 const lo = vector_bin_index::xyz_only(box.lo), hi = vector_bin_index::xyz_only(box.hi);
+            bins_of(lo).store_aligned(firsts);
+            bins_of(hi).store_aligned(lasts);
+            unsigned const narrow = simd::movemask(hi - lo <= chop_extent);
+            auto const bin_axes = [&]<int axis>() {
+                if (all_usable || axes.usable[axis])
+                    bin_axis.template operator()<axis>(r, box, firsts[axis], std::max(firsts[axis], lasts[axis]),
+                                                       narrow);
+            };
+            bin_axes.template operator()<0>();
+            bin_axes.template operator()<1>();
+            bin_axes.template operator()<2>();
         }
-        for (std::size_t k = 0; k < 3 * b; ++k)
-            boxes[k] = extend(boxes[k], basic_aabb<S>{from_lanes(vector_boxes[k].lo), from_lanes(vector_boxes[k].hi)});
+        for (std::size_t k = 0; k < 3 * b; ++k) {
+            vector_bin const& first_parts = vector_boxes[k];
+            vector_bin const& last_parts = vector_boxes[3 * b + k];
+            boxes[k] = extend(boxes[k], basic_aabb<S>{from_lanes(simd::min(first_parts.lo, last_parts.lo)),
+                                                      from_lanes(simd::max(first_parts.hi, last_parts.hi))});
+        }
     } else {
         (void)vector_boxes;
         for (auto const& r : refs) {
@@ -557,7 +578,7 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
         std::vector<basic_aabb<S>> boxes(chunks * 3 * b);
         std::vector<std::size_t> enter(chunks * 3 * b), exit(chunks * 3 * b);
         parallel_for_chunks(chunks, 1, [&](std::size_t first, std::size_t last) {
-            std::vector<vector_bin> vector_boxes(3 * b);
+            std::vector<vector_bin> vector_boxes(6 * b);
             std::vector<basic_aabb<S>> parts(b);
             for (std::size_t c = first; c < last; ++c) {
                 std::size_t const begin = c * chunk, at = c * 3 * b;
