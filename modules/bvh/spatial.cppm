@@ -492,8 +492,15 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
             }
         };
         bool const all_usable = axes.usable[0] && axes.usable[1] && axes.usable[2];
+        constexpr std::size_t prefetch_distance = 8;
         alignas(16) std::int32_t firsts[4], lasts[4];
-        for (auto const& r : refs) {
+        std::size_t const n = refs.size();
+        for (std::size_t i = 0; i < n; ++i) {
+            prim_ref<S> const& r = refs[i];
+            // The triangle of a reference ahead, in case it is clipped: references reach their
+            // triangles in no particular order, and a mesh's triangles outgrow the caches
+            // nearest the core.
+            if (i + prefetch_distance < n) __builtin_prefetch(&ctx.prims[refs[i + prefetch_distance].index]);
             // Lane 3 holds the index or the padding: taken only by min, max and select, or zeroed.
             vector_bin const box{float4::load(&r.lo.x), float4::load(&r.hi.x)};
             float4 const lo = vector_bin_index::xyz_only(box.lo), hi = vector_bin_index::xyz_only(box.hi);
