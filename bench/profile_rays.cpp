@@ -3,8 +3,8 @@
 // samples where the time goes.
 //
 //   canopy_bench_profile SCENE RAYS QUERY [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P]
-//                        [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L]
-//                        [--batch [--packets-always]] [--compare-packing]
+//                        [--quality automatic|fast|high] [--split-budget F] [--split-min-references N]
+//                        [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow | vertices | inside (canopy.bench_tracing)        QUERY  closest | any
 //
@@ -12,7 +12,7 @@
 // only function a profiler needs to look at, then prints the ray count, hits, nanoseconds per ray
 // (the fastest pass) and, from an untimed pass with a counting intersector, box and triangle
 // tests per ray. The mesh BVH is built at --quality (default fast; high: spatial splits, with
-// --split-budget, default 0.3), with B SAH bins per axis and leaves of at most L primitives (the
+// --split-budget, default 0.3, in nodes of at least --split-min-references, default 16), with B SAH bins per axis and leaves of at most L primitives (the
 // defaults of bvh_build_options unless given); its statistics line gives the references its leaves hold, its SAH
 // cost and its build time. --batch traces the set through the batch queries (canopy.query:batch,
 // packets of 8 coherent rays) instead, and prints how many packets and single rays they traced, with
@@ -59,7 +59,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow|vertices|inside closest|any [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow|vertices|inside closest|any [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--split-min-references N] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]\n",
                  program);
     return 2;
 }
@@ -157,6 +157,8 @@ int main(int argc, char** argv) {
             options.max_leaf_size = std::atoi(argv[++i]);
         } else if (a == "--split-budget" && i + 1 < argc) {
             options.split_budget = float(std::atof(argv[++i]));
+        } else if (a == "--split-min-references" && i + 1 < argc) {
+            options.split_min_references = std::uint32_t(std::atol(argv[++i]));
         }
         else return usage(argv[0]);
     }
