@@ -552,13 +552,16 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
     }
 }
 
-// The cheapest spatial split of refs (bounded by `bounds`) over `bins` planes per axis. Nodes of
+// The cheapest spatial split of refs (bounded by `bounds`) over `bins` bins per axis, chopping
+// the references at most chopped_extent_in_bins of `chop_bins` bins of the node wide (the width
+// chop_reference allows does not grow where a node bins coarsely, spatial_bins). Nodes of
 // canopy.bvh:binning's bins_in_parallel bin in parallel: the three axes of each fixed chunk
 // (bin_chunk), merged in chunk order. Boxes merge by min and max and counts
 // by sums, so the bins, and the tree, are the same however the chunks are scheduled.
 template <typename Prim, typename S>
 spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_scratch<S>& scratch,
-                                     std::span<prim_ref<S> const> refs, basic_aabb<S> const& bounds, int bins) {
+                                     std::span<prim_ref<S> const> refs, basic_aabb<S> const& bounds, int bins,
+                                     int chop_bins) {
     auto const b = std::size_t(bins);
     spatial_axes<S> axes;
     axes.planes = scratch.planes.data();
@@ -566,7 +569,7 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
     bool const* const usable = axes.usable;
     for (int axis = 0; axis < 3; ++axis) {
         S const lo = bounds.min[axis], hi = bounds.max[axis];
-        axes.chop_extent[axis] = S(double(hi - lo) / double(bins) * chopped_extent_in_bins);
+        axes.chop_extent[axis] = S(double(hi - lo) / double(chop_bins) * chopped_extent_in_bins);
         scratch.planes[std::size_t(axis) * (b + 1)] = lo; // the vector bins' origin, of unused axes too
         if (!(hi > lo)) continue;
         axes.scale[axis] = place_spatial_planes(lo, hi, bins, scratch.planes.data() + std::size_t(axis) * (b + 1));
@@ -742,6 +745,19 @@ bool spatial_range(std::span<prim_ref<S> const> refs, range_bounds<S>& range) {
     }
 }
 
+// The spatial bins per axis of a node of `count` references: the object bins, halved (at least 2)
+// in nodes of fewer than coarse_spatial_references. A reference spans a larger share of a small
+// node, so it crosses more of its bins and most of the spatial search's time is spent there
+// (clipping it into each), while a finer plane placement gains a small node little SAH. The
+// chopping width stays that of the object bins (find_spatial_split): chopping by the coarse bins'
+// width cut random needles' spatial splits by a fifth. Measured (docs/performance.md, Run 31):
+// the engine's and the forest tree's builds about 10 % faster, SAH within 0.1 % (the sliver
+// scene's within 1e-7), the box and triangle tests per ray within 1.3 %.
+inline constexpr std::size_t coarse_spatial_references = 1024;
+inline int spatial_bins(int bins, std::size_t count) {
+    return count < coarse_spatial_references ? std::max(bins / 2, 2) : bins;
+}
+
 // Builds the subtree of the `count` references at refs[begin] into nodes[node_index], adding at
 // most `budget` references (the slack after them). Where the budget is spent, the rest of the
 // subtree is canopy.bvh:object's (build_node, the same object splits, in place).
@@ -777,7 +793,7 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
         double const overlap = double(surface_area(intersection(left, right)));
         if (overlap > ctx.min_overlap && overlap > ctx.node_overlap * double(surface_area(range.bounds)) &&
             (ctx.min_gain <= 0.0 || trimming_gain(left, right, best.axis) > ctx.min_gain))
-            spatial = find_spatial_split(ctx, scratch, refs, range.bounds, opt.bins);
+            spatial = find_spatial_split(ctx, scratch, refs, range.bounds, spatial_bins(opt.bins, count), opt.bins);
     }
     // A split that would duplicate more references than the budget allows keeps the rest whole
     // on their cheaper side (partition_spatial).
