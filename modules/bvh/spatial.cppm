@@ -159,6 +159,10 @@ struct spatial_context {
     double min_gain = 0.0;         // split_min_gain
 };
 
+// bin_spatial's vector scratch for `bins` spatial bins per axis: the three axes' bins of the
+// references' first parts, then those of their last parts.
+constexpr std::size_t spatial_vector_bin_count(int bins) { return 6 * std::size_t(bins); }
+
 // Per-task working memory: the object bins, the spatial bins of the three axes (boxes, references
 // entering and leaving each bin, axis a at a · bins), their planes (axis a at a · (bins + 1)) and the sweep's right sides, and the two sides of a spatial
 // partition.
@@ -167,7 +171,7 @@ struct spatial_scratch {
     explicit spatial_scratch(int bins)
         : object(bins), boxes(3 * std::size_t(bins)), enter(3 * std::size_t(bins)), exit(3 * std::size_t(bins)),
           planes(3 * (std::size_t(bins) + 1)), right_boxes(std::size_t(bins)), right_counts(std::size_t(bins)),
-          parts(std::size_t(bins)), vector_boxes(6 * std::size_t(bins)) {}
+          parts(std::size_t(bins)), vector_boxes(spatial_vector_bin_count(bins)) {}
     bin_scratch<S> object;
     std::vector<basic_aabb<S>> boxes;
     std::vector<std::size_t> enter, exit;
@@ -395,7 +399,10 @@ inline void bin_reference_parts_vector(basic_triangle<float> const& tri, vector_
     }
 }
 
-// The last bin of a reference whose first bin is `first` and whose highest coordinate is hi.
+// The last bin of a reference whose first bin is `first` and whose highest coordinate is hi. A
+// reference's box has lo ≤ hi and plane_bin is monotonic, so the max changes nothing for one; it
+// is one instruction that keeps a box that broke that rule from walking its bins backwards.
+// bin_spatial's vector path takes the same max in lanes.
 template <typename S>
 int last_plane_bin(S hi, int first, S const* planes, int bins, S scale) {
     return std::max(first, plane_bin(hi, planes, bins, scale));
@@ -420,12 +427,21 @@ namespace canopy::detail {
 // SAH, with their builds a quarter faster.
 inline constexpr double chopped_extent_in_bins = 4.0;
 
-// Whether `r` is binned by its chopped box along `axis` (chop_extent: the widest reference box
-// chopped, per axis, chopped_extent_in_bins of the node's bins).
+// The axes along which a reference is narrow enough to be chopped across (bit a: its box's width
+// along a is at most chop_extent[a], the widest reference box chopped, chopped_extent_in_bins of
+// the node's bins). bin_spatial's vector path computes the same bits in lanes.
 template <typename S>
-bool chop_reference(prim_ref<S> const& r, int axis, vec3<S> const& chop_extent) {
-    int const b = axis == 0 ? 1 : 0, c = axis == 2 ? 1 : 2;
-    return r.hi[b] - r.lo[b] <= chop_extent[b] && r.hi[c] - r.lo[c] <= chop_extent[c];
+unsigned narrow_axes(prim_ref<S> const& r, vec3<S> const& chop_extent) {
+    unsigned bits = 0;
+    for (int a = 0; a < 3; ++a) bits |= unsigned(r.hi[a] - r.lo[a] <= chop_extent[a]) << a;
+    return bits;
+}
+
+// Whether a reference narrow along the axes `narrow` (narrow_axes) is binned by its chopped box
+// along `axis`: it is narrow along both other axes.
+constexpr bool chop_reference(unsigned narrow, int axis) {
+    unsigned const others = 7u & ~(1u << axis);
+    return (narrow & others) == others;
 }
 
 // A node's spatial planes on its three axes: axis a's bins + 1 planes at planes + a · (bins + 1)
@@ -444,8 +460,8 @@ struct spatial_axes {
 // a · bins): each bin's box grows by the parts of the references in it, enter / exit count the
 // references whose first / last bin it is (chop_reference: by its box cut to each bin's slab, or
 // by its triangle's clipped parts). One pass over the references bins all three axes: each is
-// loaded once, and the axes' independent work overlaps. vector_boxes: 6 · bins entries of
-// scratch, parts: bins.
+// loaded once, and the axes' independent work overlaps. vector_boxes: spatial_vector_bin_count
+// entries of scratch, parts: bins.
 template <typename Prim, typename S>
 void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> refs, spatial_axes<S> const& axes,
                  basic_aabb<S>* boxes, std::size_t* enter, std::size_t* exit, vector_bin* vector_boxes,
@@ -460,12 +476,12 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
         // 6 · bins): both without a branch on whether they are the same bin (then both take the
         // whole box), merged after the pass. Only the references clipped to their triangle
         // (chop_reference) take a branch.
-        for (std::size_t k = 0; k < 6 * b; ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
+        for (std::size_t k = 0; k < spatial_vector_bin_count(bins); ++k) vector_boxes[k] = {float4(inf), float4(-inf)};
         // plane_bin of the three axes in lanes: the same subtraction, multiply and clamp.
         vector_bin_index const bins_of(
             to_lanes(vec3<float>(axes.planes[0], axes.planes[b + 1], axes.planes[2 * (b + 1)])),
             to_lanes(vec3<float>(axes.scale[0], axes.scale[1], axes.scale[2])), bins);
-        // chop_reference of the three axes: lane a of the box's width within chop_extent.
+        // narrow_axes in lanes: lane a of the box's width within chop_extent.
         float4 const chop_extent(to_lanes(axes.chop_extent));
         auto const bin_axis = [&]<int axis>(prim_ref<S> const& r, vector_bin const& box, int first, int last,
                                             unsigned narrow) {
@@ -474,9 +490,8 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
             ++enter[at + std::size_t(first)];
             ++exit[at + std::size_t(last)];
             vector_bin* const axis_boxes = vector_boxes + at;
-            constexpr unsigned others = 7u & ~(1u << axis);
             auto const on_axis = float4::iota() == float4(float(axis));
-            if (first == last || (narrow & others) == others) {
+            if (first == last || chop_reference(narrow, axis)) {
                 // The parts in the first and the last bin: the box cut at the planes between.
                 bool const spans = last > first;
                 float const first_hi = spans ? planes[first + 1] : r.hi[axis];
@@ -504,13 +519,13 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
             // Lane 3 holds the index or the padding: taken only by min, max and select, or zeroed.
             vector_bin const box{float4::load(&r.lo.x), float4::load(&r.hi.x)};
             float4 const lo = vector_bin_index::xyz_only(box.lo), hi = vector_bin_index::xyz_only(box.hi);
-            bins_of(lo).store_aligned(firsts);
-            bins_of(hi).store_aligned(lasts);
-            unsigned const narrow = simd::movemask(hi - lo <= chop_extent);
+            simd::int4 const first_bins = bins_of(lo);
+            first_bins.store_aligned(firsts);
+            simd::max(first_bins, bins_of(hi)).store_aligned(lasts); // last_plane_bin
+            unsigned const narrow = simd::movemask(hi - lo <= chop_extent) & 7u; // narrow_axes
             auto const bin_axes = [&]<int axis>() {
                 if (all_usable || axes.usable[axis])
-                    bin_axis.template operator()<axis>(r, box, firsts[axis], std::max(firsts[axis], lasts[axis]),
-                                                       narrow);
+                    bin_axis.template operator()<axis>(r, box, firsts[axis], lasts[axis], narrow);
             };
             bin_axes.template operator()<0>();
             bin_axes.template operator()<1>();
@@ -525,6 +540,7 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
     } else {
         (void)vector_boxes;
         for (auto const& r : refs) {
+            unsigned const narrow = narrow_axes(r, axes.chop_extent);
             for (int axis = 0; axis < 3; ++axis) {
                 if (!axes.usable[axis]) continue;
                 S const* const planes = axes.planes + std::size_t(axis) * (b + 1);
@@ -536,7 +552,7 @@ void bin_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> 
                 ++exit[at + std::size_t(last)];
                 if (first == last) {
                     axis_boxes[first] = extend(axis_boxes[first], r.box());
-                } else if (chop_reference(r, axis, axes.chop_extent)) {
+                } else if (chop_reference(narrow, axis)) {
                     for (int k = first; k <= last; ++k) {
                         basic_aabb<S> part = r.box();
                         if (k > first) part.min[axis] = planes[k];
@@ -588,7 +604,7 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
         std::vector<basic_aabb<S>> boxes(chunks * 3 * b);
         std::vector<std::size_t> enter(chunks * 3 * b), exit(chunks * 3 * b);
         parallel_for_chunks(chunks, 1, [&](std::size_t first, std::size_t last) {
-            std::vector<vector_bin> vector_boxes(6 * b);
+            std::vector<vector_bin> vector_boxes(spatial_vector_bin_count(bins));
             std::vector<basic_aabb<S>> parts(b);
             for (std::size_t c = first; c < last; ++c) {
                 std::size_t const begin = c * chunk, at = c * 3 * b;
