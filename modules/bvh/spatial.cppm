@@ -180,7 +180,10 @@ struct spatial_scratch {
     std::vector<std::size_t> right_counts;
     std::vector<basic_aabb<S>> parts; // one reference's parts, bin by bin (bin_reference_parts)
     std::vector<vector_bin> vector_boxes; // the three axes' bins' boxes with vector_binning, twice (bin_spatial)
-    std::vector<prim_ref<S>> left, right;
+    // The two sides of a partition (build_buffer: large ones in huge pages, kept by
+    // canopy.bvh:block_cache from one build to the next), reserved for the node's references
+    // before it is partitioned, so that they grow by at most one allocation per task.
+    build_buffer<prim_ref<S>> left, right;
 };
 
 // The best spatial split: references left of `position` go left, right of it right, those that
@@ -659,8 +662,8 @@ spatial_choice<S> find_spatial_split(spatial_context<Prim> const& ctx, spatial_s
 // it (at most `budget` of them are duplicated). Returns the number of duplicates.
 template <typename Prim, typename S>
 std::size_t partition_spatial(spatial_context<Prim> const& ctx, std::span<prim_ref<S> const> refs,
-                              spatial_choice<S> const& split, std::size_t budget, std::vector<prim_ref<S>>& left,
-                              std::vector<prim_ref<S>>& right) {
+                              spatial_choice<S> const& split, std::size_t budget, build_buffer<prim_ref<S>>& left,
+                              build_buffer<prim_ref<S>>& right) {
     int const axis = split.axis;
     S const position = split.position;
     // The unsplitting test counts references one by one, as Stich et al. do.
@@ -821,10 +824,17 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
     // The two sides go through scratch.left and scratch.right, in the references' order (the
     // unsplitting test of partition_spatial counts them in that order: the in-place partition's
     // order cost 0.3 % of SAH on the benchmark meshes), then back into the node's range.
-    std::vector<prim_ref<S>>& left = scratch.left;
-    std::vector<prim_ref<S>>& right = scratch.right;
+    build_buffer<prim_ref<S>>& left = scratch.left;
+    build_buffer<prim_ref<S>>& right = scratch.right;
     left.clear();
     right.clear();
+    // Each side gets at most every reference once (a straddling one goes to both sides, as one
+    // piece each). Pushed one by one into growing arrays, the root's sides had been reallocated
+    // some 14 times each, each time in fresh pages, at every task: on a virtual machine whose page
+    // faults cost ~13 µs, 2,350 faults and 30 ms of the engine's 120 ms first build
+    // (docs/performance.md, Run 32).
+    left.reserve(count);
+    right.reserve(count);
     std::size_t duplicates = 0;
     if (use_spatial) {
         duplicates = partition_spatial(ctx, refs, spatial, budget, left, right);
