@@ -830,9 +830,9 @@ void build_spatial_node(spatial_context<Prim>& ctx, spatial_scratch<S>& scratch,
     right.clear();
     // Each side gets at most every reference once (a straddling one goes to both sides, as one
     // piece each). Pushed one by one into growing arrays, the root's sides had been reallocated
-    // some 14 times each, each time in fresh pages, at every task: on a virtual machine whose page
-    // faults cost ~13 µs, 2,350 faults and 30 ms of the engine's 120 ms first build
-    // (docs/performance.md, Run 32).
+    // some 14 times each, and each task's again, in fresh pages where the C library had returned
+    // the freed ones: on a virtual machine whose page faults cost ~13 µs, 2,350 faults and about
+    // 30 ms of the engine's build (docs/performance.md, Run 32).
     left.reserve(count);
     right.reserve(count);
     std::size_t duplicates = 0;
