@@ -3,7 +3,10 @@
 // keep_single_instance: one mesh BVH, or a top-level BVH over instances of the mesh, inst_id = the
 // instance's index), one query on it, a counting intersector, and the ray sets of a scene.
 //
-//   primary   a 512 × 512 pinhole camera looking at the scene's box from outside
+//   primary   a 512 × 512 pinhole camera looking at the scene's box from outside, its pixels row
+//             by row (pixel_order::rows, the default) or in tiles of 4 × 4 pixels, the tiles row by
+//             row and each tile's pixels row by row (pixel_order::tiles: 8 consecutive rays cover
+//             4 × 2 pixels, 16 cover 4 × 4; the drivers' --tiles)
 //   random    origins uniform in the scene's box, directions from a normal distribution
 //   shadow    from every primary hit toward a light outside the box (tmin 1e-4, tmax 1: the light)
 //   vertices  16,384 rays from origins uniform in the scene's box through a vertex of the mesh (a
@@ -142,25 +145,36 @@ struct ray_set {
     bool shadow = false; // traced with any-hit only
 };
 
+// The order of the camera's pixels in the primary set, and so in the shadow set made from it (see
+// the top of this file).
+enum class pixel_order { rows, tiles };
+
 // The ray sets of the scene (`in`, compiled as `s`).
-std::vector<ray_set> make_rays(canopy_scene const& s, bench_scene const& in) {
+std::vector<ray_set> make_rays(canopy_scene const& s, bench_scene const& in, pixel_order order = pixel_order::rows) {
     std::vector<ray_set> sets;
     aabb const box = s.scene.bounds();
     auto const c = center(box);
     auto const d = diagonal(box);
     float const extent = length(d);
-    int const w = 512, h = 512;
+    constexpr int w = 512, h = 512;
     vec3<float> const eye = c + vec3<float>(0.3f, 0.4f, 1.0f) * extent;
     vec3<float> const forward = normalize(c - eye);
     vec3<float> const right = normalize(cross(forward, vec3<float>(0, 1, 0)));
     vec3<float> const up = cross(right, forward);
     ray_set primary{"primary", {}, false};
-    for (int j = 0; j < h; ++j)
-        for (int i = 0; i < w; ++i) {
-            float const x = (float(i) + 0.5f) / float(w) - 0.5f, y = (float(j) + 0.5f) / float(h) - 0.5f;
-            primary.rays.push_back({eye, 0.0f, forward + right * (0.8f * x) + up * (0.8f * y),
-                                    std::numeric_limits<float>::infinity()});
+    constexpr int tile = 4; // pixel_order::tiles
+    static_assert(w % tile == 0 && h % tile == 0, "the tiles cover the image");
+    for (int pixel = 0; pixel < w * h; ++pixel) {
+        int i = pixel % w, j = pixel / w;
+        if (order == pixel_order::tiles) {
+            int const t = pixel / (tile * tile), in_tile = pixel % (tile * tile);
+            i = t % (w / tile) * tile + in_tile % tile;
+            j = t / (w / tile) * tile + in_tile / tile;
         }
+        float const x = (float(i) + 0.5f) / float(w) - 0.5f, y = (float(j) + 0.5f) / float(h) - 0.5f;
+        primary.rays.push_back({eye, 0.0f, forward + right * (0.8f * x) + up * (0.8f * y),
+                                std::numeric_limits<float>::infinity()});
+    }
     ray_set random{"random", {}, false};
     std::mt19937 rng(7);
     std::uniform_real_distribution<float> u01(0.0f, 1.0f);

@@ -3,6 +3,7 @@
 //   canopy_bench_embree [--scenes sphere,terrain,soup,forest,engine,bunny,slivers]
 //                       [--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2]
 //                       [--rays primary,random,shadow,vertices,inside] [--quality automatic|fast|high] [--coherent]
+//                       [--tiles]
 //
 // Scenes (canopy.bench_scenes, bench/bench_scenes.cppm): a 1.3M-triangle icosphere, a 2M-triangle
 // terrain, a 500k triangle soup, a forest of 10,000 instances of a 51k-triangle tree, two real
@@ -42,6 +43,10 @@
 // rays in the same order, in ranges of whole groups of 16. The row's Embree figure is its best
 // mode (by median), named in the row with the other two; the row also gives Canopy's batch against
 // its own single rays, timed in the same rounds.
+//
+// --tiles orders the primary rays (and so the shadow rays made from them) in tiles of 4 × 4 pixels
+// instead of row by row (canopy.bench_tracing, pixel_order): 8 consecutive rays then cover 4 × 2
+// pixels, 16 cover 4 × 4. Both libraries see the same order.
 //
 // --quality high builds Canopy's meshes with spatial splits (build_quality::high) and Embree's
 // scenes and triangle geometries with RTC_BUILD_QUALITY_HIGH (its split BVH); the default,
@@ -411,6 +416,7 @@ struct settings {
     int rounds = 5;
     bool quick = false;
     bool coherent = false;
+    canopy::bench::pixel_order order = canopy::bench::pixel_order::rows;
     std::vector<std::string> ray_sets{"primary", "random", "shadow"};
     canopy::build_quality quality = canopy::build_quality::automatic; // the library's default
 };
@@ -580,7 +586,7 @@ void run_scene(bench_scene const& in, settings const& opt) {
             double const triangles = double(in.mesh.size());
             print_row("–", "memory (bytes/triangle stored)", {double(cs->bytes) / triangles, double(cs->bytes) / triangles},
                       {double(embree_memory) / triangles, double(embree_memory) / triangles}, 1);
-            sets = make_rays(*cs, in);
+            sets = make_rays(*cs, in, opt.order);
         }
         print_row(fmt::format("{}", threads), "build (ms; ratio > 1: Canopy slower)", summarize(builds.canopy, false),
                   summarize(builds.embree, false), 1);
@@ -617,6 +623,10 @@ std::optional<settings> parse_command_line(int argc, char** argv) {
         std::string const name = argv[i];
         if (name == "--quick" || name == "--coherent") {
             (name == "--quick" ? opt.quick : opt.coherent) = true;
+            continue;
+        }
+        if (name == "--tiles") {
+            opt.order = canopy::bench::pixel_order::tiles;
             continue;
         }
         if (i + 1 == argc) return std::nullopt;
@@ -669,8 +679,10 @@ std::string cpu_model() {
 void print_header(settings const& opt) {
     fmt::print("# Canopy vs Embree {}.{}.{}: same scenes, same rays\n\n", RTC_VERSION_MAJOR, RTC_VERSION_MINOR,
                RTC_VERSION_PATCH);
-    fmt::print("Median and best of {} interleaved rounds{}. CPU: {}. Canopy ISA: {}. Build quality: {}.\n\n",
-               opt.rounds, opt.quick ? " (--quick: scenes shrunk about 16×)" : "", cpu_model(),
+    fmt::print("Median and best of {} interleaved rounds{}{}. CPU: {}. Canopy ISA: {}. Build quality: {}.\n\n",
+               opt.rounds, opt.quick ? " (--quick: scenes shrunk about 16×)" : "",
+               opt.order == canopy::bench::pixel_order::tiles ? " (--tiles: camera pixels in tiles of 4 × 4)" : "",
+               cpu_model(),
                canopy::simd::build_isa(),
                opt.quality == canopy::build_quality::high
                    ? "high (Canopy: spatial splits; Embree: RTC_BUILD_QUALITY_HIGH)"
@@ -691,7 +703,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr,
                      "usage: %s [--scenes sphere,terrain,soup,forest,engine,bunny,slivers] "
                      "[--scene FILE.obj|FILE.inst] [--quick] [--rounds N] [--threads-list 1,2] "
-                     "[--rays primary,random,shadow,vertices,inside] [--quality automatic|fast|high] [--coherent]\n",
+                     "[--rays primary,random,shadow,vertices,inside] [--quality automatic|fast|high] [--coherent] [--tiles]\n",
                      argv[0]);
         return 2;
     }

@@ -4,7 +4,7 @@
 //
 //   canopy_bench_profile SCENE RAYS QUERY [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P]
 //                        [--quality automatic|fast|high] [--split-budget F] [--split-min-references N]
-//                        [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]
+//                        [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing] [--tiles]
 //   SCENE  a name of canopy.bench_scenes (sphere, terrain, soup, forest, engine, bunny, slivers)
 //   RAYS   primary | random | shadow | vertices | inside (canopy.bench_tracing)        QUERY  closest | any
 //
@@ -20,7 +20,8 @@
 // packets' occupancy (canopy.bvh:traverse, packet_occupancy) on which the adaptive policy decides;
 // --packets-always makes every coherent group a packet (batch_packing::always). --compare-packing
 // first times single rays, the batch with packets always and the adaptive batch in turn, P rounds,
-// and prints the medians.
+// and prints the medians. --tiles orders the camera's pixels in tiles of 4 × 4 instead of row by
+// row (the primary and shadow sets; canopy.bench_tracing, pixel_order).
 #include <algorithm>
 #include <chrono>
 #include <span>
@@ -59,7 +60,7 @@ template <typename Isect>
 }
 
 int usage(char const* program) {
-    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow|vertices|inside closest|any [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--split-min-references N] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing]\n",
+    std::fprintf(stderr, "usage: %s SCENE primary|random|shadow|vertices|inside closest|any [--quick] [--from I] [--count N] [--alpha | --alpha-hook] [--passes P] [--quality automatic|fast|high] [--split-budget F] [--split-min-references N] [--bins B] [--max-leaf L] [--batch [--packets-always]] [--compare-packing] [--tiles]\n",
                  program);
     return 2;
 }
@@ -136,6 +137,7 @@ int main(int argc, char** argv) {
     bool quick = false, alpha = false, alpha_hook = false, batch = false, compare_modes = false;
     std::size_t count = 0, from = 0;
     int passes = 1;
+    auto order = canopy::bench::pixel_order::rows;
     canopy::batch_packing packing = canopy::batch_packing::adaptive;
     canopy::bvh_build_options options;
     for (int i = 4; i < argc; ++i) {
@@ -146,6 +148,7 @@ int main(int argc, char** argv) {
         else if (a == "--batch") batch = true;
         else if (a == "--packets-always") packing = canopy::batch_packing::always;
         else if (a == "--compare-packing") compare_modes = true;
+        else if (a == "--tiles") order = canopy::bench::pixel_order::tiles;
         else if (a == "--count" && i + 1 < argc) count = std::size_t(std::atoll(argv[++i]));
         else if (a == "--from" && i + 1 < argc) from = std::size_t(std::atoll(argv[++i]));
         else if (a == "--passes" && i + 1 < argc) passes = std::max(1, std::atoi(argv[++i]));
@@ -189,7 +192,7 @@ int main(int argc, char** argv) {
                 mesh.quality == canopy::build_quality::high ? "high" : "fast", st.primitive_count, references,
                 st.leaf_count, double(references) / double(st.leaf_count), st.wide_node_count,
                 mesh.blocks.size(), st.depth, st.sah_cost, st.bytes_per_primitive, build_ms);
-    auto sets = make_rays(*s, scene);
+    auto sets = make_rays(*s, scene, order);
     for (auto& set : sets) {
         if (set.name != set_name) continue;
         // --from I: the set from its I-th ray (e.g. the middle rows of the camera, where primary rays

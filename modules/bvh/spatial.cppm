@@ -181,8 +181,7 @@ struct spatial_scratch {
     std::vector<basic_aabb<S>> parts; // one reference's parts, bin by bin (bin_reference_parts)
     std::vector<vector_bin> vector_boxes; // the three axes' bins' boxes with vector_binning, twice (bin_spatial)
     // The two sides of a partition (build_buffer: large ones in huge pages, kept by
-    // canopy.bvh:block_cache from one build to the next), reserved for the node's references
-    // before it is partitioned, so that they grow by at most one allocation per task.
+    // canopy.bvh:block_cache from one build to the next; why: at the reserve in build_spatial_node).
     build_buffer<prim_ref<S>> left, right;
 };
 
