@@ -61,6 +61,18 @@ std::vector<ray> camera_rays(canopy::aabb const& box, int w, int h) {
     return rays;
 }
 
+// The same camera's rays in squares of 4 × 2 pixels, the squares row by row, each square's pixels
+// row by row.
+std::vector<ray> camera_rays_in_squares(canopy::aabb const& box, int w, int h) {
+    auto const rows = camera_rays(box, w, h);
+    std::vector<ray> squares;
+    for (int sy = 0; sy < h; sy += 2)
+        for (int sx = 0; sx < w; sx += 4)
+            for (int j = sy; j < sy + 2; ++j)
+                for (int i = sx; i < sx + 4; ++i) squares.push_back(rows[std::size_t(j * w + i)]);
+    return squares;
+}
+
 // Shadow-like rays: from points close together (a few per group of 8) towards one light.
 std::vector<ray> shadow_rays(random_source& rng, canopy::aabb const& box, int count) {
     auto const c = canopy::center(box);
@@ -151,9 +163,9 @@ struct scalar_only_filter : canopy::basic_intersector<scalar_only_filter> {
 };
 
 struct tally {
-    std::size_t packets = 0, single_rays = 0, hits = 0, mismatches = 0;
+    std::size_t packets = 0, single_rays = 0, hits = 0, mismatches = 0; // packets: in packets of 8 rays
     void add(canopy::batch_stats s) {
-        packets += s.packets;
+        packets += s.packets + 2 * s.wide_packets;
         single_rays += s.single_rays;
     }
 };
@@ -289,7 +301,7 @@ TEST_CASE("batch any_hit gives a triangle hook the candidates of the single rays
         alpha_hook batch, single;
         auto const stats = canopy::any_hit(rays, first, last, out, batch);
         for (auto const& r : rays) canopy::any_hit(r, first, last, single);
-        CHECK(stats.packets > 50);
+        CHECK(stats.packets + 2 * stats.wide_packets > 50);
         CHECK(batch.candidates == single.candidates);
         CHECK(single.candidates > 50);
         // Calls are per packet, shared by its lanes. Their number is not compared with the single
@@ -312,7 +324,7 @@ TEST_CASE("batches of 0, 1, 7, 9 and 1000 rays, and the decision per group of 8"
         CHECK(t.mismatches == 0);
         std::vector<record> out(n);
         auto const stats = canopy::closest_hit(rays, &s.mesh, &s.mesh + 1, out);
-        CHECK(stats.packets * 8 + stats.single_rays == n);
+        CHECK(stats.packets * 8 + stats.wide_packets * 16 + stats.single_rays == n);
         CHECK(stats.single_rays >= n % 8);
     }
     // One group of 8 from one origin: a packet while the directions share an octant.
@@ -413,7 +425,9 @@ TEST_CASE("adaptive packing keeps packets where their lanes stay together and tr
     auto const fine_soup = triangle_soup(rng, 60000, 8.0f, 0.05f);
     mesh_bvh const coarse = canopy::build_binned_sah(coarse_soup);
     mesh_bvh const fine = canopy::build_binned_sah(fine_soup);
-    auto const rays = camera_rays(coarse.bounds(), 64, 48);
+    // In squares of 4 × 2 already: packets of 8 consecutive rays (rows would make squares of 4 × 4,
+    // packets of 16, where 16-lane vectors are native).
+    auto const rays = camera_rays_in_squares(coarse.bounds(), 64, 48);
 
     // Over every coherent group traced as a packet: the lanes per node visit, in eighths of a
     // lane, and the lanes gone on alone per packet, in halves.
@@ -470,4 +484,66 @@ TEST_CASE("adaptive packing keeps packets where their lanes stay together and tr
     check(fine, canopy::default_intersector{}, true);
     // An intersector with a filter sees packets as documented, whatever they cost: never unpacked.
     check(fine, alpha_filter{}, false);
+}
+
+// Camera rays in tiles of 4 × 4 pixels, the tiles row by row, each tile's pixels row by row.
+std::vector<ray> camera_rays_in_tiles(canopy::aabb const& box, int w, int h) {
+    auto const rows = camera_rays(box, w, h);
+    std::vector<ray> tiles;
+    for (int ty = 0; ty < h; ty += 4)
+        for (int tx = 0; tx < w; tx += 4)
+            for (int j = ty; j < ty + 4; ++j)
+                for (int i = tx; i < tx + 4; ++i) tiles.push_back(rows[std::size_t(j * w + i)]);
+    return tiles;
+}
+
+TEST_CASE("rays laid out in rows are traced in squares of 4 × 2, with the single rays' results") {
+    random_source rng(1411);
+    scenes const s(rng);
+    auto const box = s.mesh.bounds();
+    auto const row_length = [&](std::vector<ray> const& rays, auto first, auto last) {
+        std::vector<record> out(rays.size());
+        return canopy::closest_hit(rays, first, last, out, canopy::default_intersector{}, canopy::batch_packing::always)
+            .row_length;
+    };
+    // Widths that are and are not multiples of 4; heights that leave a tail past the last band.
+    // (camera_rays spans the same angle across and down: its pixels are w / h times as tall as wide.)
+    for (auto [w, h] : {std::pair{40, 25}, std::pair{38, 20}, std::pair{64, 51}, std::pair{9, 30}}) {
+        CAPTURE(w, h);
+        auto const rays = camera_rays(box, w, h);
+        CHECK(row_length(rays, &s.mesh, &s.mesh + 1) == std::size_t(w));
+        // Squares of 4 × 4 as packets of 16 where 16-lane vectors are native; 4 × 2 as packets of 8
+        // elsewhere.
+        std::vector<record> out(rays.size());
+        auto const stats = canopy::closest_hit(rays, &s.mesh, &s.mesh + 1, out, canopy::default_intersector{},
+                                               canopy::batch_packing::always);
+        CHECK((stats.wide_packets > 0) == canopy::simd::native_width<16>);
+        CHECK(stats.packets * 8 + stats.wide_packets * 16 + stats.single_rays == rays.size());
+        tally t;
+        compare(rays, &s.mesh, &s.mesh + 1, canopy::default_intersector{}, t);
+        compare(rays, &s.mesh, &s.mesh + 1, alpha_filter{}, t);
+        compare(rays, &s.nested.top, &s.nested.top + 1, canopy::default_intersector{}, t);
+        CHECK(t.mismatches == 0);
+        CHECK(t.packets > 0);
+        // A span that starts inside a row: the length is found from the first two row ends.
+        std::vector<ray> const shifted(rays.begin() + 13, rays.end());
+        CHECK(row_length(shifted, &s.mesh, &s.mesh + 1) == std::size_t(w));
+        tally u;
+        compare(shifted, &s.mesh, &s.mesh + 1, canopy::default_intersector{}, u);
+        CHECK(u.mismatches == 0);
+    }
+    // Squares that are no tighter than runs of 8: rays already in tiles, random rays, one row, and
+    // pixels 9 times as tall as wide (a square of 4 × 2 spans 3 widths and a height, a run of 8 spans
+    // 7 widths).
+    CHECK(row_length(camera_rays(box, 64, 7), &s.mesh, &s.mesh + 1) == 0);
+    CHECK(row_length(camera_rays_in_tiles(box, 40, 24), &s.mesh, &s.mesh + 1) == 0);
+    CHECK(row_length(random_rays(rng, box, 2000), &s.mesh, &s.mesh + 1) == 0);
+    CHECK(row_length(camera_rays(box, 600, 1), &s.mesh, &s.mesh + 1) == 0);
+    // Invalid rays in the rows change nothing but their own results.
+    auto spoilt = camera_rays(box, 40, 25);
+    spoil(spoilt);
+    CHECK(row_length(spoilt, &s.mesh, &s.mesh + 1) == 40);
+    tally v;
+    compare(spoilt, &s.mesh, &s.mesh + 1, alpha_hook{}, v);
+    CHECK(v.mismatches == 0);
 }

@@ -126,13 +126,15 @@ basic_hit_record<simd::scalar_type_t<T>> record_lane(basic_hit_record<T> const& 
     return r;
 }
 
-// The records of an 8-lane packet's lanes written to out[0, 8), each what record_lane(p, k) gives
-// (how the batch queries return a packet's results): the eight 32-bit members that lead a scalar
+// The records of an 8-lane packet's lanes written to out, lane k to out[k / 4 * row_stride + k % 4]
+// (row_stride 4: out[0, 8); the batch queries' squares of 4 × 2 rays: the rows' length), each what
+// record_lane(p, k) gives (how the batch queries return a packet's results): the eight 32-bit members that lead a scalar
 // record (hit as 0 or 1, t, prim_id, geom_id, inst_id, inner_inst_id) by one 8 × 8 transposition
 // and one 32-byte copy per record, then u and v lane by lane (record_lane, once per lane, extracts
 // all ten members one at a time: 160 instructions a packet). Kept beside record_lane: a member
 // added to the record must be added to both (the static_assert below pins the layout).
-[[gnu::always_inline]] inline void write_lane_records(basic_hit_record<simd::float8> const& p, basic_hit_record<float>* out) {
+[[gnu::always_inline]] inline void write_lane_records(basic_hit_record<simd::float8> const& p, basic_hit_record<float>* out,
+                                                      std::size_t row_stride = 4) {
     using R = basic_hit_record<float>;
     static_assert(std::is_trivially_copyable_v<R> && std::is_standard_layout_v<R> && sizeof(bool) == 1 &&
                       offsetof(R, hit) == 0 && offsetof(R, t) == 4 && offsetof(R, prim_id) == 8 &&
@@ -152,10 +154,39 @@ basic_hit_record<simd::scalar_type_t<T>> record_lane(basic_hit_record<T> const& 
     for (std::size_t k = 0; k < 8; ++k) {
         std::array<float, 8> lead;
         rows[k].store(lead.data());
-        std::memcpy(static_cast<void*>(out + k), lead.data(), sizeof(lead));
-        out[k].u = p.u[int(k)];
-        out[k].v = p.v[int(k)];
+        R* const o = out + k / 4 * row_stride + k % 4;
+        std::memcpy(static_cast<void*>(o), lead.data(), sizeof(lead));
+        o->u = p.u[int(k)];
+        o->v = p.v[int(k)];
     }
+}
+
+// The records of a 16-lane packet's lanes written to out, lane k to out[k / 4 * row_stride + k % 4]
+// (the batch queries' squares of 4 × 4 rays: row_stride is the rows' length), each what
+// record_lane(p, k) gives: lanes 0-7 and 8-15 as two 8-lane records, each written by the 8-lane
+// write_lane_records (its rows of 4 rays row_stride apart).
+[[gnu::always_inline]] inline void write_lane_records(basic_hit_record<simd::float16> const& p, basic_hit_record<float>* out,
+                                                      std::size_t row_stride) {
+    std::array<basic_hit_record<simd::float8>, 2> half;
+    auto const split = [](auto const& wide, auto& low, auto& high) {
+        using narrow = std::remove_cvref_t<decltype(low)>;
+        alignas(64) std::array<typename narrow::value_type, 16> lanes;
+        wide.store(lanes.data());
+        low = narrow::load(lanes.data());
+        high = narrow::load(lanes.data() + 8);
+    };
+    std::uint32_t const hit = simd::movemask(p.hit);
+    half[0].hit = simd::mask8::from_bits(hit & 0xffu);
+    half[1].hit = simd::mask8::from_bits(hit >> 8);
+    split(p.t, half[0].t, half[1].t);
+    split(p.u, half[0].u, half[1].u);
+    split(p.v, half[0].v, half[1].v);
+    split(p.prim_id, half[0].prim_id, half[1].prim_id);
+    split(p.geom_id, half[0].geom_id, half[1].geom_id);
+    split(p.inst_id, half[0].inst_id, half[1].inst_id);
+    for (std::size_t d = 0; d < p.inner_inst_id.size(); ++d) split(p.inner_inst_id[d], half[0].inner_inst_id[d], half[1].inner_inst_id[d]);
+    write_lane_records(half[0], out, row_stride);
+    write_lane_records(half[1], out + 2 * row_stride, row_stride);
 }
 
 template <typename T>

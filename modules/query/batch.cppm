@@ -1,13 +1,30 @@
 // canopy.query:batch — the queries over a span of scalar float rays: closest_hit and any_hit
-// trace runs of 8 consecutive coherent rays as one packet (basic_ray<simd::float8>), the others
-// one at a time; multi_hit<N> traces every ray on its own.
+// trace groups of 8 coherent rays as one packet (basic_ray<simd::float8>), or of 16
+// (basic_ray<simd::float16>) where 16-lane vectors are native and the rays come in rows, the
+// others one at a time; multi_hit<N> traces every ray on its own.
 //
 //   std::vector<canopy::ray> rays = ...;
 //   std::vector<canopy::hit_record<canopy::ray, canopy::triangle>> hits(rays.size());
 //   canopy::closest_hit(rays, &mesh, &mesh + 1, hits);          // optional intersector last
 //
-// The decision is made per group of 8 (rays [8k, 8k + 8)); a shorter tail goes one at a time. A
-// group is a packet when
+// The groups. Rays laid out as an image row by row (a camera's rays, in the order most renderers
+// and ray files give them) are grouped in squares of 4 × 2 pixels: two runs of 4 rays, one row's
+// length apart. Squares make fewer box and triangle tests per packet than runs of 8 pixels of one
+// row (docs/performance.md, Runs 33 and 34). The batch finds the rows' length itself
+// (find_row_length): a row ends where the step from one ray to the next (directions scaled to
+// length 1, origins to the scene's size) exceeds 8 typical steps; a length is taken when 16
+// sampled squares are tighter than the runs of 8 that start where they start (batch_square_gain).
+// It looks once per batch, at up to batch_row_candidates row ends, and costs about one step
+// computation (in vector form, 8 at a time) per ray of a row. Where 16-lane vectors are native
+// (AVX-512) and the intersector takes packets of 16, squares of 4 × 4 go band by band (4 rows) as
+// packets of 16 (pack_wide_group), and a square that is not coherent, or while packets of 16 do
+// not pay (their own adaptive policy, below), as two squares of 4 × 2; then squares of 4 × 2 go
+// band by band (2 rows) as packets of 8. The columns past the last multiple of 4 in each row, and
+// the rays past the last whole band, go on as below. Rays not in rows (random rays, rays already
+// in tiles, a single row) are grouped in runs of 8 consecutive rays ([8k, 8k + 8)); a shorter
+// tail goes one at a time. batch_stats::row_length says which.
+//
+// The decision is made per group of 8 (or 16). A group is a packet when
 // - at least two of its rays take part (finite origin and direction, tmin ≤ tmax; the others are
 //   inactive lanes and miss, as they do on their own),
 // - their directions share one octant (the sign bits of x, y and z agree; −0 counts as negative,
@@ -15,8 +32,8 @@
 // - their origins lie within a box whose sides are at most batch_origin_spread (1/32) of the
 //   largest side of the bounds of [first, last) (camera rays: one origin; shadow rays from
 //   neighbouring pixels: close origins).
-// The test runs on the group packed as a packet (one load per ray and one 8 × 8 transposition),
-// in a few dozen vector instructions: far less than tracing the rays.
+// The test runs on the group packed as a packet (one load per ray and one 8 × 8 transposition;
+// two, joined, for 16), in a few dozen vector instructions: far less than tracing the rays.
 //
 // Whether packets pay is then measured, not guessed (batch_packing::adaptive, the default). On
 // large meshes seen from afar the lanes of a packet part early, and a packet costs more than its
@@ -35,7 +52,9 @@
 // alone per packet, slivers 5.9–7.0 and 0.3–0.5, 1.3M-triangle sphere 5.5–5.9 and 0.8–1.1, soup
 // 5.25–5.45 and 3.1–3.5; packets that lose: 2M terrain 5.0 and 2.1, the forest's instances
 // 6.2–6.3 and 5.9–6.1. Hence 41/8 (5.125) and 9/2 (4.5), between the two sides; the signal is
-// coarse, and batch_packing::always keeps every coherent group a packet.
+// coarse, and batch_packing::always keeps every coherent group a packet. Packets of 16 have a
+// policy of their own, with the same thresholds as fractions of their lanes (10.25 lanes per node
+// visit, 9 alone per packet); a group of 16 they skip goes on as two groups of 8 under theirs.
 //
 // How a packet is traced (canopy.bvh:traverse): its node test takes one child box at a time
 // against all lanes; its leaf test one triangle at a time, read straight from the leaf's block,
@@ -88,12 +107,18 @@ import :single;
 
 export namespace canopy {
 
-// What a batch query traced: packets of 8 rays, and rays one at a time (among them, unpacked_rays:
-// the rays of coherent groups traced one at a time because packets did not pay there).
+// What a batch query traced: packets of 8 rays, packets of 16 (wide_packets), and rays one at a
+// time (among them, unpacked_rays: the rays of coherent groups traced one at a time because
+// packets did not pay there).
 struct batch_stats {
-    std::size_t packets = 0;
+    std::size_t packets = 0; // packets of 8 rays
     std::size_t single_rays = 0;
     std::size_t unpacked_rays = 0;
+    // The rows' length the batch found (rays laid out as an image row by row; its packets then
+    // cover batch_group_rows rows of 4 rays each), or 0 (packets of 8 consecutive rays).
+    std::size_t row_length = 0;
+    // Packets of 16 rays: squares of 4 × 4 in rows, where 16-lane vectors are native.
+    std::size_t wide_packets = 0;
 };
 
 // Whether coherent groups of rays become packets always, or only while packets pay (see the top
@@ -120,21 +145,59 @@ inline constexpr std::size_t batch_skip_groups = 15 * batch_probe_packets;
 // gain no more on the models and lose more on the sphere.
 inline constexpr float batch_origin_spread = 1.0f / 32.0f;
 
+// A packet's rays as the batch takes them: batch_group_rows runs of batch_group_columns rays.
+// In rays laid out as an image row by row (see batch_row_length) the runs are the same columns of
+// consecutive rows, so a packet covers a square of 4 × 2 pixels; otherwise they follow each
+// other, and a packet is 8 consecutive rays.
+inline constexpr std::size_t batch_group_columns = 4;
+inline constexpr std::size_t batch_group_rows = 2;
+
+// The widest image rows the batch looks for (rays).
+inline constexpr std::size_t batch_max_row_length = std::size_t(1) << 16;
+
+// How many candidate row lengths (row ends found) the batch tries before it takes runs of 8.
+inline constexpr std::size_t batch_row_candidates = 4;
+
+// How much tighter than runs of 8 consecutive rays the sampled squares must be, in the measure of
+// batch_row_length, for the batch to take squares (a camera's rays: about 4/7 for 4 × 2 against
+// 8 × 1).
+inline constexpr float batch_square_gain = 0.75f;
+
 } // namespace canopy
 
 namespace canopy::detail {
 
 inline constexpr std::size_t batch_width = 8;
 using batch_packet = basic_ray<simd::float8>;
+static_assert(batch_group_columns * batch_group_rows == batch_width);
 
-// Whether the `packets` packets traced between two readings of packet_occupancy_tally paid: true
-// when they counted no node visit and no lane alone (a structure without wide nodes, or an
-// intersector whose packets do not count: they stay packets).
-inline bool packets_paid(packet_occupancy const& before, packet_occupancy const& after, std::uint64_t packets) {
+// Squares of 4 × 4 rays as packets of 16, where 16-lane vectors are native (AVX-512).
+inline constexpr bool batch_wide_packets = simd::native_width<16>;
+inline constexpr std::size_t batch_wide_width = 16;
+inline constexpr std::size_t batch_wide_rows = batch_wide_width / batch_group_columns;
+using batch_wide_packet = basic_ray<simd::float16>;
+
+// Where a group's rays are: lane k is ray first + (k / 4) * stride + k % 4. Stride 4: 8
+// consecutive rays; stride W (the rows' length): 4 × 2 rays of an image.
+struct ray_group {
+    std::size_t first = 0;
+    std::size_t stride = batch_group_columns;
+    [[nodiscard]] inline std::size_t operator[](std::size_t k) const {
+        return first + k / batch_group_columns * stride + k % batch_group_columns;
+    }
+};
+
+// Whether the `packets` packets of `width` lanes traced between two readings of
+// packet_occupancy_tally paid: true when they counted no node visit and no lane alone (a
+// structure without wide nodes, or an intersector whose packets do not count: they stay packets).
+// The thresholds, set for 8 lanes, scale with the width.
+inline bool packets_paid(packet_occupancy const& before, packet_occupancy const& after, std::uint64_t packets,
+                         std::uint64_t width) {
     std::uint64_t const visits = after.node_visits - before.node_visits;
     std::uint64_t const lanes = after.node_lanes - before.node_lanes;
     std::uint64_t const alone = after.lanes_alone - before.lanes_alone;
-    return 8 * lanes >= batch_paying_occupancy_eighths * visits && 2 * alone <= batch_lanes_alone_halves * packets;
+    return 64 * lanes >= batch_paying_occupancy_eighths * width * visits &&
+           16 * alone <= batch_lanes_alone_halves * width * packets;
 }
 
 // The adaptive policy's state over one batch (see the top of this file): a window of
@@ -145,7 +208,8 @@ inline bool packets_paid(packet_occupancy const& before, packet_occupancy const&
 // would call them once per group instead of inlining them.)
 class packing_policy {
 public:
-    inline explicit packing_policy(batch_packing packing) : adaptive_(packing == batch_packing::adaptive) {
+    inline packing_policy(batch_packing packing, std::size_t width)
+        : adaptive_(packing == batch_packing::adaptive), width_(width) {
         open_window(batch_first_probe_packets);
     }
 
@@ -159,7 +223,7 @@ public:
     // Called after each packet: a full window either opens the next or starts the skip.
     inline void packet_traced() {
         if (!adaptive_ || --probe_left_ != 0) return;
-        if (packets_paid(window_start_, packet_occupancy_tally, window_packets_))
+        if (packets_paid(window_start_, packet_occupancy_tally, window_packets_, width_))
             open_window(batch_probe_packets);
         else
             skip_left_ = batch_skip_groups;
@@ -172,14 +236,15 @@ private:
     }
 
     bool adaptive_;
+    std::size_t width_;
     std::size_t probe_left_ = 0, skip_left_ = 0, window_packets_ = 0;
     packet_occupancy window_start_;
 };
 
-// Whether packets of I over a range of Elem make the same calls as single rays would: the packet
-// query compiles without mistakes, every hook and filter the single rays would call has a packet
-// overload, and the structure's boxes are float.
-template <typename I, typename Elem>
+// Whether packets (of T lanes) of I over a range of Elem make the same calls as single rays would:
+// the packet query compiles without mistakes, every hook and filter the single rays would call has
+// a packet overload, and the structure's boxes are float.
+template <typename I, typename Elem, typename T = simd::float8>
 constexpr bool batch_takes_packets() {
     using Leaf = leaf_primitive_t<Elem>;
     if constexpr (acceleration_structure<Leaf> || !requires(Elem const& e) { get_bounds(e); }) {
@@ -190,35 +255,50 @@ constexpr bool batch_takes_packets() {
     } else {
         constexpr bool nested = acceleration_structure<Elem>;
         using R1 = std::conditional_t<nested, prepared_ray<float>, ray>;
-        using R8 = std::conditional_t<nested, prepared_ray<simd::float8>, batch_packet>;
-        return intersector_mistake_v<I, batch_packet, Elem> == intersector_mistake::none &&
-               (!primitive_hook_for<I, R1, Leaf> || primitive_hook_for<I, R8, Leaf>) &&
-               (!box_hook_for<I, R1, aabb, vec3<float>> || box_hook_for<I, R8, aabb, vec3<simd::float8>>) &&
-               (!filter_hook_for<I, R1> || filter_hook_for<I, R8>);
+        using RN = std::conditional_t<nested, prepared_ray<T>, basic_ray<T>>;
+        return intersector_mistake_v<I, basic_ray<T>, Elem> == intersector_mistake::none &&
+               (!primitive_hook_for<I, R1, Leaf> || primitive_hook_for<I, RN, Leaf>) &&
+               (!box_hook_for<I, R1, aabb, vec3<float>> || box_hook_for<I, RN, aabb, vec3<T>>) &&
+               (!filter_hook_for<I, R1> || filter_hook_for<I, RN>);
     }
 }
 
-// batch_origin_spread times the largest side of the bounds of [first, last); 0 when they are
-// empty or not finite (then only rays from one origin form packets).
+// The largest side of the bounds of [first, last); 0 when they are empty or not finite.
 template <typename It>
-float batch_spread_limit(It first, It last) {
+float batch_scene_side(It first, It last) {
     aabb box;
     for (; first != last; ++first) box = extend(box, get_bounds(*first));
     auto const d = diagonal(box);
     float const side = std::max({d.x, d.y, d.z});
-    return std::isfinite(side) && side > 0.0f ? side * batch_origin_spread : 0.0f;
+    return std::isfinite(side) && side > 0.0f ? side : 0.0f;
 }
+
+// A ray's place for find_row_length: its direction scaled to 1-norm 1, and its origin times
+// inv_side (1 / the scene's largest side, or 0: origins then do not count). Not finite for a ray
+// that takes part in nothing (a zero, NaN or infinite direction or origin).
+struct ray_place {
+    vec3<float> direction, origin;
+    inline ray_place(ray const& r, float inv_side)
+        : direction(r.direction * (1.0f / (std::fabs(r.direction.x) + std::fabs(r.direction.y) + std::fabs(r.direction.z)))),
+          origin(r.origin * inv_side) {}
+    // The 1-norm of the difference of two places (not finite when either is not).
+    [[nodiscard]] inline float distance(ray_place const& o) const {
+        return std::fabs(direction.x - o.direction.x) + std::fabs(direction.y - o.direction.y) +
+               std::fabs(direction.z - o.direction.z) + std::fabs(origin.x - o.origin.x) +
+               std::fabs(origin.y - o.origin.y) + std::fabs(origin.z - o.origin.z);
+    }
+};
 
 // The 8 rays of a group as one packet: each ray is 8 floats (origin, tmin, direction, tmax), loaded
 // as one vector; the 8 × 8 block transposed gives one vector per member.
-inline batch_packet pack_group(std::span<ray const> group) {
+inline batch_packet pack_group(std::span<ray const> rays, ray_group g) {
     static_assert(sizeof(ray) == batch_width * sizeof(float) && offsetof(ray, origin) == 0 &&
                       offsetof(ray, tmin) == 3 * sizeof(float) && offsetof(ray, direction) == 4 * sizeof(float) &&
                       offsetof(ray, tmax) == 7 * sizeof(float),
                   "pack_group reads a ray as 8 consecutive floats");
     std::array<simd::float8, batch_width> rows;
     for (std::size_t k = 0; k < batch_width; ++k)
-        rows[k] = simd::float8::load(reinterpret_cast<float const*>(&group[k]));
+        rows[k] = simd::float8::load(reinterpret_cast<float const*>(&rays[g[k]]));
     simd::transpose(rows);
     batch_packet p;
     p.origin = {rows[0], rows[1], rows[2]};
@@ -228,26 +308,148 @@ inline batch_packet pack_group(std::span<ray const> group) {
     return p;
 }
 
+// The 16 rays of a square of 4 × 4 (lane k: ray g[k]) as one packet: its two halves packed as
+// pack_group does, then joined member by member.
+inline batch_wide_packet pack_wide_group(std::span<ray const> rays, ray_group g) {
+    auto const low = pack_group(rays, g);
+    auto const high = pack_group(rays, {g.first + batch_group_rows * g.stride, g.stride});
+    auto const join = [](simd::float8 a, simd::float8 b) {
+        alignas(64) std::array<float, batch_wide_width> lanes;
+        a.store(lanes.data());
+        b.store(lanes.data() + batch_width);
+        return simd::float16::load(lanes.data());
+    };
+    batch_wide_packet p;
+    for (int a = 0; a < 3; ++a) {
+        p.origin[a] = join(low.origin[a], high.origin[a]);
+        p.direction[a] = join(low.direction[a], high.direction[a]);
+    }
+    p.tmin = join(low.tmin, high.tmin);
+    p.tmax = join(low.tmax, high.tmax);
+    return p;
+}
+
+// The places (ray_place) of a group's 8 rays, one vector per coordinate: direction x, y, z, then
+// origin x, y, z; the same operations as ray_place, lane by lane.
+inline std::array<simd::float8, 6> group_places(std::span<ray const> rays, ray_group g, float inv_side) {
+    auto const p = pack_group(rays, g);
+    simd::float8 const inv =
+        simd::float8(1.0f) / (simd::abs(p.direction.x) + simd::abs(p.direction.y) + simd::abs(p.direction.z));
+    simd::float8 const scale(inv_side);
+    return {p.direction.x * inv, p.direction.y * inv, p.direction.z * inv,
+            p.origin.x * scale,  p.origin.y * scale,  p.origin.z * scale};
+}
+
+// The spread of a group's places: summed over the six coordinates, the largest minus the smallest,
+// over the rays whose place is finite (0 when none is).
+inline float place_spread(std::array<simd::float8, 6> const& c) {
+    simd::float8 const inf(std::numeric_limits<float>::infinity());
+    auto finite = simd::abs(c[0]) < inf;
+    for (std::size_t a = 1; a < c.size(); ++a) finite = finite & (simd::abs(c[a]) < inf);
+    if (simd::none(finite)) return 0.0f;
+    float s = 0.0f;
+    for (auto const& v : c) s += simd::reduce_max(simd::select(finite, v, -inf)) - simd::reduce_min(simd::select(finite, v, inf));
+    return s;
+}
+
+// Whether rays laid out in rows of w make tighter groups as squares (batch_group_rows runs of 4,
+// w apart) than as runs of 8 consecutive rays: the summed place_spread of 16 sampled squares is at
+// most batch_square_gain times that of the runs of 8 that start where they start. A length whose
+// first two squares are already looser than their runs is dropped there (most candidates that are
+// not rows: a look at 4 groups instead of 32).
+inline bool squares_pay(std::span<ray const> rays, std::size_t w, float inv_side) {
+    std::size_t const band = batch_group_rows * w, bands = rays.size() / band, columns = w / batch_group_columns;
+    if (w < batch_group_columns || bands == 0) return false;
+    float squares = 0.0f, runs = 0.0f;
+    constexpr std::size_t samples = 16;
+    for (std::size_t k = 0; k < samples; ++k) {
+        // Spread over the bands and the columns (7919 is prime: the columns differ between samples).
+        ray_group const g{k % bands * band + (k * 7919 % columns) * batch_group_columns, w};
+        squares += place_spread(group_places(rays, g, inv_side));
+        runs += place_spread(group_places(rays, ray_group{g.first}, inv_side));
+        if (k == 1 && !(squares < runs)) return false;
+    }
+    return squares <= batch_square_gain * runs && runs > 0.0f;
+}
+
+// The steps from ray i - 1 to ray i for the 8 rays i in [first, first + 8) (first ≥ 1): what
+// ray_place::distance gives, lane by lane, with the same operations.
+inline simd::float8 place_steps(std::span<ray const> rays, std::size_t first, float inv_side) {
+    auto const here = group_places(rays, ray_group{first}, inv_side);
+    auto const before = group_places(rays, ray_group{first - 1}, inv_side);
+    simd::float8 d = simd::abs(here[0] - before[0]);
+    for (std::size_t c = 1; c < here.size(); ++c) d = d + simd::abs(here[c] - before[c]);
+    return d;
+}
+
+// The rows' length of rays laid out as an image row by row, or 0 (see the top of this file).
+inline std::size_t find_row_length(std::span<ray const> rays, float scene_side) {
+    std::size_t const n = rays.size();
+    if (n < 2 * batch_width + 1) return 0;
+    float const inv_side = scene_side > 0.0f ? 1.0f / scene_side : 0.0f;
+    // A typical step from one ray to the next: the median of the first 16 steps.
+    std::array<float, 2 * batch_width> first_steps;
+    place_steps(rays, 1, inv_side).store(first_steps.data());
+    place_steps(rays, 1 + batch_width, inv_side).store(first_steps.data() + batch_width);
+    auto const middle = first_steps.begin() + std::ptrdiff_t(batch_width);
+    std::nth_element(first_steps.begin(), middle, first_steps.end(),
+                     [](float x, float y) { return std::isless(x, y) || (!std::isnan(x) && std::isnan(y)); });
+    float const typical = *middle;
+    if (!(typical > 0.0f) || !std::isfinite(typical)) return 0;
+    // A row ends where a step is over 8 typical steps (steps to or from a ray whose place is not
+    // finite do not count). The first end gives the length when the span starts at a row's start;
+    // the distance between two ends otherwise. The first batch_row_candidates lengths are tried.
+    std::size_t const last = std::min({n - 1, 2 * (n / batch_group_rows), 2 * batch_max_row_length});
+    std::size_t previous_end = 0, tried = 0, found = 0;
+    auto const row_end = [&](std::size_t i) { // true: stop looking
+        std::size_t const w = i - previous_end;
+        if (w <= batch_max_row_length && squares_pay(rays, w, inv_side)) {
+            found = w;
+            return true;
+        }
+        previous_end = i;
+        return ++tried == batch_row_candidates;
+    };
+    float const big = 8.0f * typical;
+    std::size_t i = 1;
+    for (; i + batch_width - 1 <= last; i += batch_width) {
+        simd::float8 const step = place_steps(rays, i, inv_side);
+        auto const ends = (step > simd::float8(big)) & (step < simd::float8(std::numeric_limits<float>::infinity()));
+        for (std::uint32_t bits = simd::movemask(ends); bits != 0; bits &= bits - 1)
+            if (row_end(i + std::size_t(std::countr_zero(bits)))) return found;
+    }
+    for (; i <= last; ++i) {
+        float const step = ray_place(rays[i], inv_side).distance(ray_place(rays[i - 1], inv_side));
+        if (step > big && step < std::numeric_limits<float>::infinity() && row_end(i)) return found;
+    }
+    return 0;
+}
+
 // How many groups ahead of the one being traced the batch loop starts loading rays into the
 // cache: a group's rays (256 bytes) are read once, and a packet's traversal is long enough that
 // the loads of the next ones finish meanwhile.
 inline constexpr std::size_t batch_prefetch_groups = 2;
 
-// Starts loading rays [first, first + 8) into the cache (nothing past the end of the span).
-[[gnu::always_inline]] inline void prefetch_group(std::span<ray const> rays, std::size_t first) {
-    if (first + batch_width > rays.size()) return;
-    auto const* p = reinterpret_cast<char const*>(rays.data() + first);
-    for (std::size_t k = 0; k < batch_width * sizeof(ray); k += 64) __builtin_prefetch(p + k);
+// Starts loading the rays of group g, of `rows` rows of 4, into the cache (nothing past the end
+// of the span).
+[[gnu::always_inline]] inline void prefetch_group(std::span<ray const> rays, ray_group g, std::size_t rows = batch_group_rows) {
+    if (g[rows * batch_group_columns - 1] >= rays.size()) return;
+    for (std::size_t r = 0; r < rows; ++r) {
+        auto const* p = reinterpret_cast<char const*>(rays.data() + g[r * batch_group_columns]);
+        for (std::size_t k = 0; k < batch_group_columns * sizeof(ray); k += 64) __builtin_prefetch(p + k);
+        __builtin_prefetch(p + batch_group_columns * sizeof(ray) - 1);
+    }
 }
 
-// The coherence test of one group of 8 rays, packed (see the top of this file), over the lanes
-// that take part: at least two, one octant (sign bits: -0 counts as negative), origins within
-// spread_limit on each axis.
-inline bool coherent_group(batch_packet const& p, float spread_limit) {
+// The coherence test of one group of 8 (or 16) rays, packed (see the top of this file), over the
+// lanes that take part: at least two, one octant (sign bits: -0 counts as negative), origins
+// within spread_limit on each axis.
+template <typename T>
+bool coherent_group(basic_ray<T> const& p, float spread_limit) {
     std::uint32_t const active = simd::movemask(active_lanes(p));
     if (std::popcount(active) < 2) return false;
-    auto const taking_part = simd::mask_type_t<simd::float8>::from_bits(active);
-    simd::float8 const inf(std::numeric_limits<float>::infinity());
+    auto const taking_part = simd::mask_type_t<T>::from_bits(active);
+    T const inf(std::numeric_limits<float>::infinity());
     for (int a = 0; a < 3; ++a) {
         std::uint32_t const negative = simd::sign_bits(p.direction[a]) & active;
         if (negative != 0 && negative != active) return false;
@@ -262,9 +464,11 @@ inline void check_batch_sizes(std::size_t rays, std::size_t results) {
     if (results < rays) throw std::invalid_argument("canopy: a batch query needs one result per ray");
 }
 
-// The batch loop: groups of 8 coherent rays go to packet(index, packet ray) while packets pay
-// (always with batch_packing::always), every other ray to single(index). packet is generic, so
-// that it is only instantiated where packets are traced.
+// The batch loop: groups of 8 coherent rays go to packet(group, packet ray) while packets pay
+// (always with batch_packing::always), every other ray to single(index). The groups are squares of
+// 4 × 2 rays in rays laid out in rows (find_row_length), runs of 8 otherwise; whatever is left
+// (the columns past the last multiple of 4 in each row, the tail) goes on alone. packet is
+// generic, so that it is only instantiated where packets are traced.
 template <typename I, typename It, typename Packet, typename Single>
 batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packing packing, Packet&& packet,
                       Single&& single) {
@@ -274,27 +478,65 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
         single(k);
         ++stats.single_rays;
     };
+    std::size_t const n = rays.size();
     std::size_t i = 0;
     if constexpr (batch_takes_packets<I, Elem>()) {
-        if (rays.size() >= batch_width) {
-            float const limit = batch_spread_limit(first, last);
-            packing_policy policy(packing);
-            for (; i + batch_width <= rays.size(); i += batch_width) {
-                prefetch_group(rays, i + batch_prefetch_groups * batch_width);
-                auto const p = pack_group(rays.subspan(i, batch_width));
+        if (n >= batch_width) {
+            float const side = batch_scene_side(first, last);
+            float const limit = side * batch_origin_spread;
+            packing_policy policy(packing, batch_width);
+            auto const group = [&](ray_group g, ray_group ahead) {
+                prefetch_group(rays, ahead);
+                auto const p = pack_group(rays, g);
                 bool const coherent = coherent_group(p, limit);
                 if (coherent && policy.packs_next()) {
-                    packet(i, p);
+                    packet(g, p);
                     ++stats.packets;
                     policy.packet_traced();
                 } else {
-                    for (std::size_t k = i; k < i + batch_width; ++k) one(k);
+                    for (std::size_t k = 0; k < batch_width; ++k) one(g[k]);
                     if (coherent) stats.unpacked_rays += batch_width;
                 }
+            };
+            std::size_t const w = find_row_length(rays, side);
+            stats.row_length = w;
+            std::size_t const columns = w / batch_group_columns * batch_group_columns;
+            if constexpr (batch_wide_packets && batch_takes_packets<I, Elem, simd::float16>()) {
+                // Squares of 4 × 4 as packets of 16 while they are coherent and pay; the others as
+                // two squares of 4 × 2.
+                packing_policy wide_policy(packing, batch_wide_width);
+                std::size_t const band = batch_wide_rows * w;
+                for (; w != 0 && i + band <= n; i += band) {
+                    for (std::size_t c = 0; c < columns; c += batch_group_columns) {
+                        ray_group const g{i + c, w};
+                        prefetch_group(rays, {i + c + batch_prefetch_groups * batch_group_columns, w}, batch_wide_rows);
+                        auto const p = pack_wide_group(rays, g);
+                        if (coherent_group(p, limit) && wide_policy.packs_next()) {
+                            packet(g, p);
+                            ++stats.wide_packets;
+                            wide_policy.packet_traced();
+                        } else {
+                            group(g, g);
+                            group({g.first + batch_group_rows * w, w}, g);
+                        }
+                    }
+                    for (std::size_t r = 0; r < batch_wide_rows; ++r)
+                        for (std::size_t c = columns; c < w; ++c) one(i + r * w + c);
+                }
             }
+            if (w != 0) {
+                std::size_t const band = batch_group_rows * w;
+                for (; i + band <= n; i += band) {
+                    for (std::size_t c = 0; c < columns; c += batch_group_columns)
+                        group({i + c, w}, {i + c + batch_prefetch_groups * batch_group_columns, w});
+                    for (std::size_t r = 0; r < batch_group_rows; ++r)
+                        for (std::size_t c = columns; c < w; ++c) one(i + r * w + c);
+                }
+            }
+            for (; i + batch_width <= n; i += batch_width) group({i}, {i + batch_prefetch_groups * batch_width});
         }
     }
-    for (; i < rays.size(); ++i) one(i);
+    for (; i < n; ++i) one(i);
     return stats;
 }
 
@@ -345,9 +587,9 @@ batch_stats closest_hit(std::span<ray const> rays, It first, It last, std::span<
     detail::check_batch_sizes(rays.size(), out.size());
     return detail::run_batch<std::remove_reference_t<I>>(
         rays, first, last, packing,
-        [&](std::size_t i, auto const& p) {
+        [&](detail::ray_group g, auto const& p) {
             auto const hr = closest_hit(p, first, last, isect);
-            write_lane_records(hr, out.data() + i);
+            write_lane_records(hr, out.data() + g.first, g.stride);
         },
         [&](std::size_t i) { out[i] = detail::query_one_ray<true>(rays[i], first, last, isect); });
 }
@@ -359,9 +601,9 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<basi
     detail::check_batch_sizes(rays.size(), out.size());
     return detail::run_batch<std::remove_reference_t<I>>(
         rays, first, last, packing,
-        [&](std::size_t i, auto const& p) {
+        [&](detail::ray_group g, auto const& p) {
             auto const hr = any_hit(p, first, last, isect);
-            write_lane_records(hr, out.data() + i);
+            write_lane_records(hr, out.data() + g.first, g.stride);
         },
         [&](std::size_t i) { out[i] = detail::query_one_ray<false>(rays[i], first, last, isect); });
 }
@@ -373,9 +615,9 @@ batch_stats any_hit(std::span<ray const> rays, It first, It last, std::span<bool
     detail::check_batch_sizes(rays.size(), out.size());
     return detail::run_batch<std::remove_reference_t<I>>(
         rays, first, last, packing,
-        [&](std::size_t i, auto const& p) {
+        [&](detail::ray_group g, auto const& p) {
             auto const hr = any_hit(p, first, last, isect);
-            for (int k = 0; k < int(detail::batch_width); ++k) out[i + std::size_t(k)] = hr.hit[k];
+            for (int k = 0; k < simd::simd_width_v<decltype(hr.t)>; ++k) out[g[std::size_t(k)]] = hr.hit[k];
         },
         [&](std::size_t i) { out[i] = detail::query_one_ray<false>(rays[i], first, last, isect).hit; });
 }
@@ -387,7 +629,7 @@ batch_stats multi_hit(std::span<ray const> rays, It first, It last, std::span<st
                       I&& isect = I{}) {
     detail::check_batch_sizes(rays.size(), out.size());
     for (std::size_t i = 0; i < rays.size(); ++i) out[i] = multi_hit<N>(rays[i], first, last, isect);
-    return {0, rays.size()};
+    return {.packets = 0, .single_rays = rays.size()};
 }
 
 } // namespace canopy

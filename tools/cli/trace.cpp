@@ -60,8 +60,14 @@ std::unique_ptr<loaded_bench_scene> load_bench_scene(std::filesystem::path const
     return scene;
 }
 
-// Rays per task of `trace` (a multiple of the batch queries' groups of 8).
+// Rays per chunk of `trace`: the unit in which processes share out a ray file under mpirun (a
+// multiple of the batch queries' groups of 8).
 constexpr std::size_t trace_chunk = 256;
+// The grain of the threads' ranges of chunks, each range one batch query: oneTBB splits a range
+// while it is longer than this, so a batch gets 16 to 32 chunks (but for a file's last), 4,096 to
+// 8,192 rays: two rows or more of a camera's image up to 2,048 pixels wide, so that the batch can
+// find the rows and trace squares of pixels (canopy.query:batch).
+constexpr std::size_t trace_batch_chunks = 32;
 
 canopy::bench_hit to_bench_hit(canopy::basic_hit_record<float> const& hr) {
     if (!hr.hit) return {};
@@ -81,7 +87,8 @@ std::size_t trace_rays(canopy::compiled_scene const& scene, std::span<canopy::ra
             }));
         return 0;
     }
-    std::array<canopy::basic_hit_record<float>, trace_chunk> records;
+    thread_local std::vector<canopy::basic_hit_record<float>> records;
+    records.resize(std::max(records.size(), rays.size()));
     std::span<canopy::basic_hit_record<float>> const got(records.data(), rays.size());
     auto const stats = scene.visit_root([&](auto const& root) {
         return closest ? canopy::closest_hit(rays, &root, &root + 1, got, isect)
@@ -111,23 +118,21 @@ struct trace_setup {
     canopy::build_quality quality = canopy::build_quality::automatic;
 };
 
-// Chunks of trace_chunk rays (a multiple of 8: the batch queries' groups are the same whatever
-// the threads and processes), as many at once as the threads take; returns the packets traced.
+// Runs of chunks of trace_chunk rays (trace_batch_chunks), as many at once as the threads take,
+// each run one batch query; returns the packets traced. (The hits do not depend on how the
+// rays are cut: a batch query's results are the single rays'.)
 std::size_t trace_chunks(canopy::compiled_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> hits,
                          trace_setup const& setup) {
     std::size_t const chunks = (rays.size() + trace_chunk - 1) / trace_chunk;
     std::atomic<std::size_t> packets{0};
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](auto const& range) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, trace_batch_chunks), [&](auto const& range) {
         with_choice(trace_intersectors, setup.intersector, [&](auto const& row) {
             auto isect = row.make();
-            std::size_t n = 0;
-            for (std::size_t c = range.begin(); c != range.end(); ++c) {
-                std::size_t const first = c * trace_chunk, count = std::min(trace_chunk, rays.size() - first);
-                std::span<canopy::ray const> const in(rays.data() + first, count);
-                std::span<canopy::bench_hit> const out(hits.data() + first, count);
-                n += trace_rays(scene, in, out, setup.closest, setup.batch, isect);
-            }
-            packets += n;
+            std::size_t const first = range.begin() * trace_chunk;
+            std::size_t const count = std::min(range.end() * trace_chunk, rays.size()) - first;
+            std::span<canopy::ray const> const in(rays.data() + first, count);
+            std::span<canopy::bench_hit> const out(hits.data() + first, count);
+            packets += trace_rays(scene, in, out, setup.closest, setup.batch, isect);
         });
     });
     return packets;
