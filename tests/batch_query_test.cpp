@@ -61,16 +61,16 @@ std::vector<ray> camera_rays(canopy::aabb const& box, int w, int h) {
     return rays;
 }
 
-// The same camera's rays in squares of 4 × 2 pixels, the squares row by row, each square's pixels
-// row by row.
-std::vector<ray> camera_rays_in_squares(canopy::aabb const& box, int w, int h) {
+// The same camera's rays in blocks of bw × bh pixels (w and h multiples of them), the blocks row by
+// row, each block's pixels row by row.
+std::vector<ray> camera_rays_in_blocks(canopy::aabb const& box, int w, int h, int bw, int bh) {
     auto const rows = camera_rays(box, w, h);
-    std::vector<ray> squares;
-    for (int sy = 0; sy < h; sy += 2)
-        for (int sx = 0; sx < w; sx += 4)
-            for (int j = sy; j < sy + 2; ++j)
-                for (int i = sx; i < sx + 4; ++i) squares.push_back(rows[std::size_t(j * w + i)]);
-    return squares;
+    std::vector<ray> blocks;
+    for (int by = 0; by < h; by += bh)
+        for (int bx = 0; bx < w; bx += bw)
+            for (int j = by; j < by + bh; ++j)
+                for (int i = bx; i < bx + bw; ++i) blocks.push_back(rows[std::size_t(j * w + i)]);
+    return blocks;
 }
 
 // Shadow-like rays: from points close together (a few per group of 8) towards one light.
@@ -427,7 +427,7 @@ TEST_CASE("adaptive packing keeps packets where their lanes stay together and tr
     mesh_bvh const fine = canopy::build_binned_sah(fine_soup);
     // In squares of 4 × 2 already: packets of 8 consecutive rays (rows would make squares of 4 × 4,
     // packets of 16, where 16-lane vectors are native).
-    auto const rays = camera_rays_in_squares(coarse.bounds(), 64, 48);
+    auto const rays = camera_rays_in_blocks(coarse.bounds(), 64, 48, 4, 2);
 
     // Over every coherent group traced as a packet: the lanes per node visit, in eighths of a
     // lane, and the lanes gone on alone per packet, in halves.
@@ -486,17 +486,6 @@ TEST_CASE("adaptive packing keeps packets where their lanes stay together and tr
     check(fine, alpha_filter{}, false);
 }
 
-// Camera rays in tiles of 4 × 4 pixels, the tiles row by row, each tile's pixels row by row.
-std::vector<ray> camera_rays_in_tiles(canopy::aabb const& box, int w, int h) {
-    auto const rows = camera_rays(box, w, h);
-    std::vector<ray> tiles;
-    for (int ty = 0; ty < h; ty += 4)
-        for (int tx = 0; tx < w; tx += 4)
-            for (int j = ty; j < ty + 4; ++j)
-                for (int i = tx; i < tx + 4; ++i) tiles.push_back(rows[std::size_t(j * w + i)]);
-    return tiles;
-}
-
 TEST_CASE("rays laid out in rows are traced in squares of 4 × 2, with the single rays' results") {
     random_source rng(1411);
     scenes const s(rng);
@@ -536,7 +525,7 @@ TEST_CASE("rays laid out in rows are traced in squares of 4 × 2, with the singl
     // pixels 9 times as tall as wide (a square of 4 × 2 spans 3 widths and a height, a run of 8 spans
     // 7 widths).
     CHECK(row_length(camera_rays(box, 64, 7), &s.mesh, &s.mesh + 1) == 0);
-    CHECK(row_length(camera_rays_in_tiles(box, 40, 24), &s.mesh, &s.mesh + 1) == 0);
+    CHECK(row_length(camera_rays_in_blocks(box, 40, 24, 4, 4), &s.mesh, &s.mesh + 1) == 0);
     CHECK(row_length(random_rays(rng, box, 2000), &s.mesh, &s.mesh + 1) == 0);
     CHECK(row_length(camera_rays(box, 600, 1), &s.mesh, &s.mesh + 1) == 0);
     // Invalid rays in the rows change nothing but their own results.
