@@ -75,7 +75,7 @@ canopy::bench_hit to_bench_hit(canopy::basic_hit_record<float> const& hr) {
 }
 
 // Rays [first, first + out.size()) into out: one at a time, or through the batch queries
-// (returning how many packets they traced).
+// (returning how many rays they traced in packets).
 template <typename Isect>
 std::size_t trace_rays(canopy::compiled_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> out,
                        bool closest, bool batch, Isect& isect) {
@@ -95,7 +95,7 @@ std::size_t trace_rays(canopy::compiled_scene const& scene, std::span<canopy::ra
                        : canopy::any_hit(rays, &root, &root + 1, got, isect);
     });
     for (std::size_t i = 0; i < rays.size(); ++i) out[i] = to_bench_hit(got[i]);
-    return stats.packets;
+    return 8 * stats.packets + 16 * stats.wide_packets;
 }
 
 // The intersectors of --intersector: make() gives one for a task's rays.
@@ -119,12 +119,12 @@ struct trace_setup {
 };
 
 // Runs of chunks of trace_chunk rays (trace_batch_chunks), as many at once as the threads take,
-// each run one batch query; returns the packets traced. (The hits do not depend on how the
+// each run one batch query; returns the rays traced in packets. (The hits do not depend on how the
 // rays are cut: a batch query's results are the single rays'.)
 std::size_t trace_chunks(canopy::compiled_scene const& scene, std::span<canopy::ray const> rays, std::span<canopy::bench_hit> hits,
                          trace_setup const& setup) {
     std::size_t const chunks = (rays.size() + trace_chunk - 1) / trace_chunk;
-    std::atomic<std::size_t> packets{0};
+    std::atomic<std::size_t> packed{0};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, trace_batch_chunks), [&](auto const& range) {
         with_choice(trace_intersectors, setup.intersector, [&](auto const& row) {
             auto isect = row.make();
@@ -132,10 +132,10 @@ std::size_t trace_chunks(canopy::compiled_scene const& scene, std::span<canopy::
             std::size_t const count = std::min(range.end() * trace_chunk, rays.size()) - first;
             std::span<canopy::ray const> const in(rays.data() + first, count);
             std::span<canopy::bench_hit> const out(hits.data() + first, count);
-            packets += trace_rays(scene, in, out, setup.closest, setup.batch, isect);
+            packed += trace_rays(scene, in, out, setup.closest, setup.batch, isect);
         });
     });
-    return packets;
+    return packed;
 }
 
 // The seconds of one pass, or with --reps N the median of N passes after a warm-up pass.
@@ -155,12 +155,12 @@ double timed_passes(int reps, Pass const& pass) {
     return times.size() % 2 == 1 ? times[mid] : 0.5 * (times[mid - 1] + times[mid]);
 }
 
-void print_trace(loaded_bench_scene const& scene, trace_setup const& setup, std::uint64_t rays, std::uint64_t packets,
+void print_trace(loaded_bench_scene const& scene, trace_setup const& setup, std::uint64_t rays, std::uint64_t packed,
                  std::uint64_t hit_count, double trace_seconds) {
     std::string const timing =
         setup.reps == 0 ? std::string() : fmt::format(" (median of {} after a warm-up pass)", setup.reps);
     std::string const how =
-        setup.batch ? fmt::format("batch: {} packets of 8, {} single rays", packets, rays - 8 * packets) : setup.mode;
+        setup.batch ? fmt::format("batch: {} rays in packets, {} single rays", packed, rays - packed) : setup.mode;
     fmt::print("build {:.3f} ms at quality {}, trace {} rays ({}) in {:.3f} ms{}: {:.2f} Mrays/s, {} hits\n",
                scene.build_seconds * 1e3, quality_used(setup.quality, scene.compiled.meshes[0].accel.quality), rays, how,
                trace_seconds * 1e3, timing, trace_seconds > 0 ? double(rays) / trace_seconds * 1e-6 : 0.0, hit_count);
@@ -235,8 +235,9 @@ int trace_across_ranks(trace_setup const& setup) {
     });
     step("tracing " + setup.rays_path);
     std::size_t const chunks = std::size_t((ray_count + trace_chunk - 1) / trace_chunk);
-    std::uint64_t packets = 0, hit_count = 0;
-    // A range's result: its packets and hits (two uint64), then its hits as the hit file holds them.
+    std::uint64_t packed = 0, hit_count = 0;
+    // A range's result: its rays traced in packets and its hits (two uint64), then its hits as the
+    // hit file holds them.
     auto const work = [&](dist::item_range r) {
         std::uint64_t const first = r.first * trace_chunk;
         std::uint64_t const count = std::min<std::uint64_t>(r.count * trace_chunk, ray_count - first);
@@ -254,13 +255,13 @@ int trace_across_ranks(trace_setup const& setup) {
     auto const collect = [&](dist::item_range r, std::span<std::byte const> bytes) {
         std::uint64_t counts[2];
         std::memcpy(counts, bytes.data(), sizeof counts);
-        packets += counts[0];
+        packed += counts[0];
         hit_count += counts[1];
         output->write(20 * r.first * trace_chunk, bytes.subspan(sizeof counts));
     };
     dist::deal_report report;
     double const trace_seconds = timed_passes(setup.reps, [&] {
-        packets = hit_count = 0;
+        packed = hit_count = 0;
         report = dist::deal(ranks, chunks, work, collect);
     });
     on_every_rank([&] {
@@ -270,7 +271,7 @@ int trace_across_ranks(trace_setup const& setup) {
     });
     record_sharing(report);
     print_sharing("chunks of 256 rays");
-    if (root_rank()) print_trace(*scene, setup, ray_count, packets, hit_count, trace_seconds);
+    if (root_rank()) print_trace(*scene, setup, ray_count, packed, hit_count, trace_seconds);
     return 0;
 }
 #endif
@@ -287,7 +288,7 @@ std::string trace_options_usage() {
            "  --out FILE          20-byte hits: t, prim, inst, u, v (checked writable before tracing)\n" +
            option_usage("--intersector KIND", choice_list(choices(trace_intersectors), true)) +
            "  --mode MODE         single (default): one ray at a time; batch: the batch queries, which\n"
-           "                      trace groups of 8 coherent rays as packets (same hits, byte for byte)\n"
+           "                      trace groups of 8 or 16 coherent rays as packets (same hits, byte for byte)\n"
            "  --reps N            one warm-up pass, then N timed passes, 1 to 1000; the median is\n"
            "                      printed (default: one timed pass, no warm-up)\n"
            "  --threads N         worker threads, 1 to 1024 (default: all cores)\n";
@@ -333,9 +334,9 @@ int run_trace(std::span<char*> all_args) {
     if (rays.empty()) throw canopy::scene_error(rays_path, "", "holds no rays (the file is empty): nothing to trace");
     step("tracing " + rays_path);
     std::vector<canopy::bench_hit> hits(rays.size());
-    std::size_t packets = 0;
+    std::size_t packed = 0;
     double const trace_seconds = timed_passes(reps, [&] {
-        packets = trace_chunks(scene->compiled, rays, hits, setup);
+        packed = trace_chunks(scene->compiled, rays, hits, setup);
     });
     step("writing " + out_path);
     canopy::write_bench_hits(out_path, hits);
@@ -343,7 +344,7 @@ int run_trace(std::span<char*> all_args) {
     std::size_t const hit_count = std::size_t(std::count_if(hits.begin(), hits.end(), [](auto const& h) {
         return h.prim != canopy::invalid_id;
     }));
-    print_trace(*scene, setup, rays.size(), packets, hit_count, trace_seconds);
+    print_trace(*scene, setup, rays.size(), packed, hit_count, trace_seconds);
     return 0;
 }
 
