@@ -105,6 +105,8 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
     std::printf("rays %zu, hits %zu, %.1f ns/ray, %.2f box tests/ray, %.2f triangle tests/ray\n", rays.size(), hits,
                 seconds * 1e9 / n, double(counter.boxes) / n, double(counter.triangles) / n);
     if (batch) {
+        // Packets of 8 and of 16 rays (squares of 4 × 4, where 16-lane vectors are native).
+        auto const all_packets = [](canopy::batch_stats const& b) { return b.packets + b.wide_packets; };
         canopy::detail::packet_occupancy_tally = {};
         auto const traced = canopy_trace_batch(s, rays, closest, isect, records, packing);
         auto const o = canopy::detail::packet_occupancy_tally;
@@ -112,16 +114,16 @@ int run(canopy_scene const& s, std::vector<canopy::ray> const& rays, bool closes
         std::printf("packet occupancy: %.2f node visits and %.2f leaf visits per packet, %.2f lanes per node visit, "
                     "%.2f per leaf visit, %.2f lanes alone per packet; %zu packets, %zu rays of coherent groups "
                     "traced one by one\n",
-                    per(o.node_visits, traced.packets), per(o.leaf_visits, traced.packets), per(o.node_lanes, o.node_visits),
-                    per(o.leaf_lanes, o.leaf_visits), per(o.lanes_alone, traced.packets), traced.packets,
-                    traced.unpacked_rays);
+                    per(o.node_visits, all_packets(traced)), per(o.leaf_visits, all_packets(traced)),
+                    per(o.node_lanes, o.node_visits), per(o.leaf_lanes, o.leaf_visits),
+                    per(o.lanes_alone, all_packets(traced)), all_packets(traced), traced.unpacked_rays);
         counting_intersector<Isect> packed;
         std::vector<canopy::basic_hit_record<float>> out(rays.size());
         auto const stats = canopy_trace_batch(s, rays, closest, packed, out, packing);
-        double const p = double(stats.packets);
-        std::printf("batch: %zu packets of 8, %zu single rays; per packet %.2f box tests, %.2f triangle tests; "
-                    "per single ray %.2f box tests, %.2f triangle tests\n",
-                    stats.packets, stats.single_rays, p > 0 ? double(packed.packet_boxes) / p : 0.0,
+        double const p = double(all_packets(stats));
+        std::printf("batch: %zu packets of 8, %zu packets of 16, %zu single rays (rows of %zu rays; 0: none found); "
+                    "per packet %.2f box tests, %.2f triangle tests; per single ray %.2f box tests, %.2f triangle tests\n",
+                    stats.packets, stats.wide_packets, stats.single_rays, stats.row_length, p > 0 ? double(packed.packet_boxes) / p : 0.0,
                     p > 0 ? double(packed.packet_triangles) / p : 0.0,
                     stats.single_rays > 0 ? double(packed.boxes) / double(stats.single_rays) : 0.0,
                     stats.single_rays > 0 ? double(packed.triangles) / double(stats.single_rays) : 0.0);

@@ -12,7 +12,7 @@
 // length apart. Squares make fewer box and triangle tests per packet than runs of 8 pixels of one
 // row (docs/performance.md, Runs 33 and 34). The batch finds the rows' length itself
 // (find_row_length): a row ends where the step from one ray to the next (directions scaled to
-// length 1, origins to the scene's size) exceeds 8 typical steps; a length is taken when 16
+// length 1, origins to the scene's size) exceeds 4 typical steps; a length is taken when 16
 // sampled squares are tighter than the runs of 8 that start where they start (batch_square_gain).
 // It looks once per batch, at up to batch_row_candidates row ends, and costs about one step
 // computation (in vector form, 8 at a time) per ray of a row. Where 16-lane vectors are native
@@ -396,10 +396,14 @@ inline std::size_t find_row_length(std::span<ray const> rays, float scene_side) 
                      [](float x, float y) { return std::isless(x, y) || (!std::isnan(x) && std::isnan(y)); });
     float const typical = *middle;
     if (!(typical > 0.0f) || !std::isfinite(typical)) return 0;
-    // A row ends where a step is over 8 typical steps (steps to or from a ray whose place is not
-    // finite do not count). The first end gives the length when the span starts at a row's start;
-    // the distance between two ends otherwise. The first batch_row_candidates lengths are tried.
-    std::size_t const last = std::min({n - 1, 2 * (n / batch_group_rows), 2 * batch_max_row_length});
+    // A row ends where a step is over 4 typical steps (a row of w rays ends with a step of about
+    // w - 1 of them; steps to or from a ray whose place is not finite do not count). The first end
+    // gives the length when the span starts at a row's start; the distance between two ends
+    // otherwise. The first batch_row_candidates lengths are tried.
+    // Ends are looked for in the first half of the span: a length is of use when a band of 2 rows
+    // fits (the first end of rows that start with the span), and the scan is all the cost of a
+    // span that holds no rows (shadow rays with holes, random rays: about 12 instructions a ray).
+    std::size_t const last = std::min({n - 1, n / 2, 2 * batch_max_row_length});
     std::size_t previous_end = 0, tried = 0, found = 0;
     auto const row_end = [&](std::size_t i) { // true: stop looking
         std::size_t const w = i - previous_end;
@@ -410,7 +414,7 @@ inline std::size_t find_row_length(std::span<ray const> rays, float scene_side) 
         previous_end = i;
         return ++tried == batch_row_candidates;
     };
-    float const big = 8.0f * typical;
+    float const big = 4.0f * typical;
     std::size_t i = 1;
     for (; i + batch_width - 1 <= last; i += batch_width) {
         simd::float8 const step = place_steps(rays, i, inv_side);
