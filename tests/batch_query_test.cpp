@@ -507,7 +507,7 @@ TEST_CASE("rays laid out in rows are traced in squares of 4 × 2, with the singl
         auto const stats = canopy::closest_hit(rays, &s.mesh, &s.mesh + 1, out, canopy::default_intersector{},
                                                canopy::batch_packing::always);
         CHECK((stats.wide_packets > 0) == canopy::simd::native_width<16>);
-        CHECK(stats.packets * 8 + stats.wide_packets * 16 + stats.single_rays == rays.size());
+        CHECK(stats.packed_rays() + stats.single_rays == rays.size());
         tally t;
         compare(rays, &s.mesh, &s.mesh + 1, canopy::default_intersector{}, t);
         compare(rays, &s.mesh, &s.mesh + 1, alpha_filter{}, t);

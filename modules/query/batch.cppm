@@ -119,6 +119,9 @@ struct batch_stats {
     std::size_t row_length = 0;
     // Packets of 16 rays: squares of 4 × 4 in rows, where 16-lane vectors are native.
     std::size_t wide_packets = 0;
+
+    // The rays traced in packets (of 8 or 16).
+    [[nodiscard]] constexpr std::size_t packed_rays() const { return 8 * packets + 16 * wide_packets; }
 };
 
 // Whether coherent groups of rays become packets always, or only while packets pay (see the top
@@ -187,22 +190,18 @@ struct ray_group {
     }
 };
 
-// Whether the `packets` packets of `width` lanes traced between two readings of
-// packet_occupancy_tally paid: true when they counted no node visit and no lane alone (a
-// structure without wide nodes, or an intersector whose packets do not count: they stay packets).
-// The thresholds, set for 8 lanes, scale with the width.
-inline bool packets_paid(packet_occupancy const& before, packet_occupancy const& after, std::uint64_t packets,
-                         std::uint64_t width) {
-    std::uint64_t const visits = after.node_visits - before.node_visits;
-    std::uint64_t const lanes = after.node_lanes - before.node_lanes;
-    std::uint64_t const alone = after.lanes_alone - before.lanes_alone;
-    return 64 * lanes >= batch_paying_occupancy_eighths * width * visits &&
-           16 * alone <= batch_lanes_alone_halves * width * packets;
+// Whether `packets` packets of `width` lanes, whose counts (packet_occupancy_tally's, summed over
+// them) are `window`, paid: true when they counted no node visit and no lane alone (a structure
+// without wide nodes, or an intersector whose packets do not count: they stay packets). The
+// thresholds, set for 8 lanes, scale with the width.
+inline bool packets_paid(packet_occupancy const& window, std::uint64_t packets, std::uint64_t width) {
+    return 64 * window.node_lanes >= batch_paying_occupancy_eighths * width * window.node_visits &&
+           16 * window.lanes_alone <= batch_lanes_alone_halves * width * packets;
 }
 
 // The adaptive policy's state over one batch (see the top of this file): a window of
-// batch_first_probe_packets packets, then windows of batch_probe_packets, each measured from
-// packet_occupancy_tally; after a window that did not pay, batch_skip_groups coherent groups traced
+// batch_first_probe_packets packets, then windows of batch_probe_packets, each measured from its
+// packets' counts in packet_occupancy_tally; after a window that did not pay, batch_skip_groups coherent groups traced
 // one ray at a time. With batch_packing::always every coherent group is a packet.
 // (Member functions are declared inline: in a named module they are not implicitly, and importers
 // would call them once per group instead of inlining them.)
@@ -220,10 +219,17 @@ public:
         if (--skip_left_ == 0) open_window(batch_probe_packets);
         return false;
     }
-    // Called after each packet: a full window either opens the next or starts the skip.
-    inline void packet_traced() {
-        if (!adaptive_ || --probe_left_ != 0) return;
-        if (packets_paid(window_start_, packet_occupancy_tally, window_packets_, width_))
+    // Called after each packet with the tally read before it: the packet's own counts join the
+    // window (so that packets of 8 and of 16 traced in turn count each in its own policy); a full
+    // window either opens the next or starts the skip.
+    inline void packet_traced(packet_occupancy const& before) {
+        if (!adaptive_) return;
+        packet_occupancy const& after = packet_occupancy_tally;
+        window_.node_visits += after.node_visits - before.node_visits;
+        window_.node_lanes += after.node_lanes - before.node_lanes;
+        window_.lanes_alone += after.lanes_alone - before.lanes_alone;
+        if (--probe_left_ != 0) return;
+        if (packets_paid(window_, window_packets_, width_))
             open_window(batch_probe_packets);
         else
             skip_left_ = batch_skip_groups;
@@ -232,13 +238,13 @@ public:
 private:
     inline void open_window(std::size_t packets) {
         probe_left_ = window_packets_ = packets;
-        window_start_ = packet_occupancy_tally;
+        window_ = {};
     }
 
     bool adaptive_;
     std::size_t width_;
     std::size_t probe_left_ = 0, skip_left_ = 0, window_packets_ = 0;
-    packet_occupancy window_start_;
+    packet_occupancy window_;
 };
 
 // Whether packets (of T lanes) of I over a range of Elem make the same calls as single rays would:
@@ -272,22 +278,6 @@ float batch_scene_side(It first, It last) {
     float const side = std::max({d.x, d.y, d.z});
     return std::isfinite(side) && side > 0.0f ? side : 0.0f;
 }
-
-// A ray's place for find_row_length: its direction scaled to 1-norm 1, and its origin times
-// inv_side (1 / the scene's largest side, or 0: origins then do not count). Not finite for a ray
-// that takes part in nothing (a zero, NaN or infinite direction or origin).
-struct ray_place {
-    vec3<float> direction, origin;
-    inline ray_place(ray const& r, float inv_side)
-        : direction(r.direction * (1.0f / (std::fabs(r.direction.x) + std::fabs(r.direction.y) + std::fabs(r.direction.z)))),
-          origin(r.origin * inv_side) {}
-    // The 1-norm of the difference of two places (not finite when either is not).
-    [[nodiscard]] inline float distance(ray_place const& o) const {
-        return std::fabs(direction.x - o.direction.x) + std::fabs(direction.y - o.direction.y) +
-               std::fabs(direction.z - o.direction.z) + std::fabs(origin.x - o.origin.x) +
-               std::fabs(origin.y - o.origin.y) + std::fabs(origin.z - o.origin.z);
-    }
-};
 
 // The 8 rays of a group as one packet: each ray is 8 floats (origin, tmin, direction, tmax), loaded
 // as one vector; the 8 × 8 block transposed gives one vector per member.
@@ -329,8 +319,10 @@ inline batch_wide_packet pack_wide_group(std::span<ray const> rays, ray_group g)
     return p;
 }
 
-// The places (ray_place) of a group's 8 rays, one vector per coordinate: direction x, y, z, then
-// origin x, y, z; the same operations as ray_place, lane by lane.
+// The places of a group's 8 rays, one vector per coordinate: direction x, y, z, then origin x, y,
+// z. A ray's place is its direction scaled to 1-norm 1, and its origin times inv_side (1 / the
+// scene's largest side, or 0: origins then do not count); not finite for a ray that takes part in
+// nothing (a zero, NaN or infinite direction or origin).
 inline std::array<simd::float8, 6> group_places(std::span<ray const> rays, ray_group g, float inv_side) {
     auto const p = pack_group(rays, g);
     simd::float8 const inv =
@@ -372,8 +364,8 @@ inline bool squares_pay(std::span<ray const> rays, std::size_t w, float inv_side
     return squares <= batch_square_gain * runs && runs > 0.0f;
 }
 
-// The steps from ray i - 1 to ray i for the 8 rays i in [first, first + 8) (first ≥ 1): what
-// ray_place::distance gives, lane by lane, with the same operations.
+// The steps from ray i - 1 to ray i for the 8 rays i in [first, first + 8) (first ≥ 1): the 1-norm
+// of the difference of their places (group_places; not finite when either place is not).
 inline simd::float8 place_steps(std::span<ray const> rays, std::size_t first, float inv_side) {
     auto const here = group_places(rays, ray_group{first}, inv_side);
     auto const before = group_places(rays, ray_group{first - 1}, inv_side);
@@ -414,17 +406,15 @@ inline std::size_t find_row_length(std::span<ray const> rays, float scene_side) 
         previous_end = i;
         return ++tried == batch_row_candidates;
     };
-    float const big = 4.0f * typical;
-    std::size_t i = 1;
-    for (; i + batch_width - 1 <= last; i += batch_width) {
-        simd::float8 const step = place_steps(rays, i, inv_side);
-        auto const ends = (step > simd::float8(big)) & (step < simd::float8(std::numeric_limits<float>::infinity()));
-        for (std::uint32_t bits = simd::movemask(ends); bits != 0; bits &= bits - 1)
-            if (row_end(i + std::size_t(std::countr_zero(bits)))) return found;
-    }
-    for (; i <= last; ++i) {
-        float const step = ray_place(rays[i], inv_side).distance(ray_place(rays[i - 1], inv_side));
-        if (step > big && step < std::numeric_limits<float>::infinity() && row_end(i)) return found;
+    simd::float8 const big(4.0f * typical), inf(std::numeric_limits<float>::infinity());
+    // The steps to rays [i, i + 8); at the end (last ≥ 8, as n ≥ 17) the steps to rays
+    // (last - 7, last] not yet looked at.
+    for (std::size_t i = 1; i <= last; i += batch_width) {
+        std::size_t const first = std::min(i, last + 1 - batch_width);
+        simd::float8 const step = place_steps(rays, first, inv_side);
+        std::uint32_t const ends = simd::movemask((step > big) & (step < inf)) >> (i - first) << (i - first);
+        for (std::uint32_t bits = ends; bits != 0; bits &= bits - 1)
+            if (row_end(first + std::size_t(std::countr_zero(bits)))) return found;
     }
     return 0;
 }
@@ -494,9 +484,10 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
                 auto const p = pack_group(rays, g);
                 bool const coherent = coherent_group(p, limit);
                 if (coherent && policy.packs_next()) {
+                    packet_occupancy const before = packet_occupancy_tally;
                     packet(g, p);
                     ++stats.packets;
-                    policy.packet_traced();
+                    policy.packet_traced(before);
                 } else {
                     for (std::size_t k = 0; k < batch_width; ++k) one(g[k]);
                     if (coherent) stats.unpacked_rays += batch_width;
@@ -516,9 +507,10 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
                         prefetch_group(rays, {i + c + batch_prefetch_groups * batch_group_columns, w}, batch_wide_rows);
                         auto const p = pack_wide_group(rays, g);
                         if (coherent_group(p, limit) && wide_policy.packs_next()) {
+                            packet_occupancy const before = packet_occupancy_tally;
                             packet(g, p);
                             ++stats.wide_packets;
-                            wide_policy.packet_traced();
+                            wide_policy.packet_traced(before);
                         } else {
                             group(g, g);
                             group({g.first + batch_group_rows * w, w}, g);

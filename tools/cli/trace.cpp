@@ -95,7 +95,7 @@ std::size_t trace_rays(canopy::compiled_scene const& scene, std::span<canopy::ra
                        : canopy::any_hit(rays, &root, &root + 1, got, isect);
     });
     for (std::size_t i = 0; i < rays.size(); ++i) out[i] = to_bench_hit(got[i]);
-    return 8 * stats.packets + 16 * stats.wide_packets;
+    return stats.packed_rays();
 }
 
 // The intersectors of --intersector: make() gives one for a task's rays.
