@@ -44,11 +44,12 @@ bool identical(record const& a, record const& b) {
            a.geom_id == b.geom_id && a.inst_id == b.inst_id && a.inner_inst_id == b.inner_inst_id;
 }
 
-// A pinhole camera outside the box looking at its centre: w × h rays, row by row.
-std::vector<ray> camera_rays(canopy::aabb const& box, int w, int h) {
+// A pinhole camera outside the box looking at its centre: w × h rays, row by row. side -1 puts
+// the camera on the opposite side of the box (its rays' z signs flip).
+std::vector<ray> camera_rays(canopy::aabb const& box, int w, int h, float side = 1.0f) {
     auto const c = canopy::center(box);
     float const extent = canopy::length(canopy::diagonal(box));
-    vec3<float> const eye = c + vec3<float>(0.3f, 0.4f, 1.0f) * extent;
+    vec3<float> const eye = c + vec3<float>(0.3f, 0.4f, 1.0f) * (side * extent);
     vec3<float> const forward = canopy::normalize(c - eye);
     vec3<float> const right = canopy::normalize(canopy::cross(forward, vec3<float>(0, 1, 0)));
     vec3<float> const up = canopy::cross(right, forward);
@@ -63,14 +64,24 @@ std::vector<ray> camera_rays(canopy::aabb const& box, int w, int h) {
 
 // The same camera's rays in blocks of bw × bh pixels (w and h multiples of them), the blocks row by
 // row, each block's pixels row by row.
-std::vector<ray> camera_rays_in_blocks(canopy::aabb const& box, int w, int h, int bw, int bh) {
-    auto const rows = camera_rays(box, w, h);
+std::vector<ray> camera_rays_in_blocks(canopy::aabb const& box, int w, int h, int bw, int bh, float side = 1.0f) {
+    auto const rows = camera_rays(box, w, h, side);
     std::vector<ray> blocks;
     for (int by = 0; by < h; by += bh)
         for (int bx = 0; bx < w; bx += bw)
             for (int j = by; j < by + bh; ++j)
                 for (int i = bx; i < bx + bw; ++i) blocks.push_back(rows[std::size_t(j * w + i)]);
     return blocks;
+}
+
+// Runs of `run` rays of a and of b in turn (a and b the same size, a multiple of run).
+std::vector<ray> alternate_runs(std::vector<ray> const& a, std::vector<ray> const& b, std::size_t run) {
+    std::vector<ray> out;
+    for (std::size_t i = 0; i < a.size(); i += run) {
+        out.insert(out.end(), a.begin() + std::ptrdiff_t(i), a.begin() + std::ptrdiff_t(i + run));
+        out.insert(out.end(), b.begin() + std::ptrdiff_t(i), b.begin() + std::ptrdiff_t(i + run));
+    }
+    return out;
 }
 
 // Shadow-like rays: from points close together (a few per group of 8) towards one light.
@@ -385,15 +396,19 @@ TEST_CASE("packets down to one or two lanes continue as single rays with the sin
     scenes const s(rng);
     auto check = [&](canopy::aabb const& box, auto first, auto last) {
         tally t;
-        // Groups of 8 from one origin whose directions share an octant but fan out widely.
+        // Groups of 8 from one origin whose directions share an octant but fan out widely. Groups
+        // look from opposite corners in turn (octants + + + and - - -), so that no run of 16 rays
+        // is coherent (where 16-lane vectors are native) and each group of 8 is decided alone.
         auto const c = canopy::center(box);
         float const extent = canopy::length(canopy::diagonal(box));
         std::vector<ray> rays;
         for (int g = 0; g < 120; ++g) {
-            vec3<float> const eye = c + vec3<float>(-0.7f, -0.6f, -1.0f) * extent + rng.point(-0.01f, 0.01f) * extent;
+            float const side = g % 2 == 0 ? 1.0f : -1.0f;
+            vec3<float> const eye = c + vec3<float>(-0.7f, -0.6f, -1.0f) * (side * extent) + rng.point(-0.01f, 0.01f) * extent;
             for (int k = 0; k < 8; ++k) {
                 vec3<float> const target = rng.point_in(box);
-                rays.push_back(make_ray(eye, canopy::max(target - eye, vec3<float>(1e-3f, 1e-3f, 1e-3f))));
+                vec3<float> const towards = (target - eye) * side;
+                rays.push_back(make_ray(eye, canopy::max(towards, vec3<float>(1e-3f, 1e-3f, 1e-3f)) * side));
             }
             // Some groups keep one or two rays taking part.
             if (g % 3 == 1)
@@ -426,8 +441,10 @@ TEST_CASE("adaptive packing keeps packets where their lanes stay together and tr
     mesh_bvh const coarse = canopy::build_binned_sah(coarse_soup);
     mesh_bvh const fine = canopy::build_binned_sah(fine_soup);
     // In squares of 4 × 2 already: packets of 8 consecutive rays (rows would make squares of 4 × 4,
-    // packets of 16, where 16-lane vectors are native).
-    auto const rays = camera_rays_in_blocks(coarse.bounds(), 64, 48, 4, 2);
+    // packets of 16, where 16-lane vectors are native). The squares of two cameras on opposite
+    // sides in turn, so that no run of 16 rays is coherent either (their z signs differ).
+    auto const rays = alternate_runs(camera_rays_in_blocks(coarse.bounds(), 64, 48, 4, 2),
+                                     camera_rays_in_blocks(coarse.bounds(), 64, 48, 4, 2, -1.0f), 8);
 
     // Over every coherent group traced as a packet: the lanes per node visit, in eighths of a
     // lane, and the lanes gone on alone per packet, in halves.
@@ -526,6 +543,22 @@ TEST_CASE("rays laid out in rows are traced in squares of 4 × 2, with the singl
     // 7 widths).
     CHECK(row_length(camera_rays(box, 64, 7), &s.mesh, &s.mesh + 1) == 0);
     CHECK(row_length(camera_rays_in_blocks(box, 40, 24, 4, 4), &s.mesh, &s.mesh + 1) == 0);
+    // Rays already in tiles of 4 × 4: runs of 16 as packets of 16 where 16-lane vectors are native,
+    // with the single rays' results.
+    {
+        auto const tiles = camera_rays_in_blocks(box, 40, 24, 4, 4);
+        std::vector<record> out(tiles.size());
+        auto const stats = canopy::closest_hit(tiles, &s.mesh, &s.mesh + 1, out, canopy::default_intersector{},
+                                               canopy::batch_packing::always);
+        CHECK((stats.wide_packets > 0) == canopy::simd::native_width<16>);
+        CHECK(stats.packed_rays() + stats.single_rays == tiles.size());
+        tally t;
+        compare(tiles, &s.mesh, &s.mesh + 1, canopy::default_intersector{}, t);
+        compare(tiles, &s.mesh, &s.mesh + 1, alpha_hook{}, t);
+        compare(tiles, &s.nested.top, &s.nested.top + 1, canopy::default_intersector{}, t);
+        CHECK(t.mismatches == 0);
+        CHECK(t.packets > 0);
+    }
     CHECK(row_length(random_rays(rng, box, 2000), &s.mesh, &s.mesh + 1) == 0);
     CHECK(row_length(camera_rays(box, 600, 1), &s.mesh, &s.mesh + 1) == 0);
     // Invalid rays in the rows change nothing but their own results.

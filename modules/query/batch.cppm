@@ -21,8 +21,12 @@
 // not pay (their own adaptive policy, below), as two squares of 4 × 2; then squares of 4 × 2 go
 // band by band (2 rows) as packets of 8. The columns past the last multiple of 4 in each row, and
 // the rays past the last whole band, go on as below. Rays not in rows (random rays, rays already
-// in tiles, a single row) are grouped in runs of 8 consecutive rays ([8k, 8k + 8)); a shorter
-// tail goes one at a time. batch_stats::row_length says which.
+// in tiles, a single row) are grouped in runs of 8 consecutive rays ([8k, 8k + 8)); where 16-lane
+// vectors are native, runs of 16 first ([16k, 16k + 16), the same adaptive policy of their own as
+// squares of 4 × 4), a run that is not coherent or while they do not pay as two runs of 8 (rays
+// already in tiles of 4 × 4 pixels then go as squares; shadow rays from neighbouring pixels gain
+// a few per cent, docs/performance.md, Run 36). A shorter tail goes one at a time.
+// batch_stats::row_length says which.
 //
 // The decision is made per group of 8 (or 16). A group is a packet when
 // - at least two of its rays take part (finite origin and direction, tmin ≤ tmax; the others are
@@ -460,7 +464,8 @@ inline void check_batch_sizes(std::size_t rays, std::size_t results) {
 
 // The batch loop: groups of 8 coherent rays go to packet(group, packet ray) while packets pay
 // (always with batch_packing::always), every other ray to single(index). The groups are squares of
-// 4 × 2 rays in rays laid out in rows (find_row_length), runs of 8 otherwise; whatever is left
+// 4 × 2 rays in rays laid out in rows (find_row_length), runs of 8 otherwise (of 16 and 4 × 4 as
+// above, where 16-lane vectors are native); whatever is left
 // (the columns past the last multiple of 4 in each row, the tail) goes on alone. packet is
 // generic, so that it is only instantiated where packets are traced.
 template <typename I, typename It, typename Packet, typename Single>
@@ -518,6 +523,22 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
                     }
                     for (std::size_t r = 0; r < batch_wide_rows; ++r)
                         for (std::size_t c = columns; c < w; ++c) one(i + r * w + c);
+                }
+                // Not in rows: runs of 16 while they are coherent and pay; the others as two runs
+                // of 8.
+                for (; w == 0 && i + batch_wide_width <= n; i += batch_wide_width) {
+                    ray_group const g{i};
+                    prefetch_group(rays, {i + batch_prefetch_groups * batch_wide_width}, batch_wide_rows);
+                    auto const p = pack_wide_group(rays, g);
+                    if (coherent_group(p, limit) && wide_policy.packs_next()) {
+                        packet_occupancy const before = packet_occupancy_tally;
+                        packet(g, p);
+                        ++stats.wide_packets;
+                        wide_policy.packet_traced(before);
+                    } else {
+                        group(g, g);
+                        group({i + batch_width}, g);
+                    }
                 }
             }
             if (w != 0) {
