@@ -512,6 +512,21 @@ TEST_CASE("rays laid out in rows are traced in squares of 4 × 2, with the singl
         return canopy::closest_hit(rays, first, last, out, canopy::default_intersector{}, canopy::batch_packing::always)
             .row_length;
     };
+    // Packets of 16 exactly where 16-lane vectors are native, every ray traced once, and the
+    // single rays' results without an intersector, with `isect`, and through instances.
+    auto const check_packets_of_16 = [&](std::vector<ray> const& rays, auto const& isect) {
+        std::vector<record> out(rays.size());
+        auto const stats = canopy::closest_hit(rays, &s.mesh, &s.mesh + 1, out, canopy::default_intersector{},
+                                               canopy::batch_packing::always);
+        CHECK((stats.wide_packets > 0) == canopy::simd::native_width<16>);
+        CHECK(stats.packed_rays() + stats.single_rays == rays.size());
+        tally t;
+        compare(rays, &s.mesh, &s.mesh + 1, canopy::default_intersector{}, t);
+        compare(rays, &s.mesh, &s.mesh + 1, isect, t);
+        compare(rays, &s.nested.top, &s.nested.top + 1, canopy::default_intersector{}, t);
+        CHECK(t.mismatches == 0);
+        CHECK(t.packets > 0);
+    };
     // Widths that are and are not multiples of 4; heights that leave a tail past the last band.
     // (camera_rays spans the same angle across and down: its pixels are w / h times as tall as wide.)
     for (auto [w, h] : {std::pair{40, 25}, std::pair{38, 20}, std::pair{64, 51}, std::pair{9, 30}}) {
@@ -520,17 +535,7 @@ TEST_CASE("rays laid out in rows are traced in squares of 4 × 2, with the singl
         CHECK(row_length(rays, &s.mesh, &s.mesh + 1) == std::size_t(w));
         // Squares of 4 × 4 as packets of 16 where 16-lane vectors are native; 4 × 2 as packets of 8
         // elsewhere.
-        std::vector<record> out(rays.size());
-        auto const stats = canopy::closest_hit(rays, &s.mesh, &s.mesh + 1, out, canopy::default_intersector{},
-                                               canopy::batch_packing::always);
-        CHECK((stats.wide_packets > 0) == canopy::simd::native_width<16>);
-        CHECK(stats.packed_rays() + stats.single_rays == rays.size());
-        tally t;
-        compare(rays, &s.mesh, &s.mesh + 1, canopy::default_intersector{}, t);
-        compare(rays, &s.mesh, &s.mesh + 1, alpha_filter{}, t);
-        compare(rays, &s.nested.top, &s.nested.top + 1, canopy::default_intersector{}, t);
-        CHECK(t.mismatches == 0);
-        CHECK(t.packets > 0);
+        check_packets_of_16(rays, alpha_filter{});
         // A span that starts inside a row: the length is found from the first two row ends.
         std::vector<ray> const shifted(rays.begin() + 13, rays.end());
         CHECK(row_length(shifted, &s.mesh, &s.mesh + 1) == std::size_t(w));
@@ -545,20 +550,7 @@ TEST_CASE("rays laid out in rows are traced in squares of 4 × 2, with the singl
     CHECK(row_length(camera_rays_in_blocks(box, 40, 24, 4, 4), &s.mesh, &s.mesh + 1) == 0);
     // Rays already in tiles of 4 × 4: runs of 16 as packets of 16 where 16-lane vectors are native,
     // with the single rays' results.
-    {
-        auto const tiles = camera_rays_in_blocks(box, 40, 24, 4, 4);
-        std::vector<record> out(tiles.size());
-        auto const stats = canopy::closest_hit(tiles, &s.mesh, &s.mesh + 1, out, canopy::default_intersector{},
-                                               canopy::batch_packing::always);
-        CHECK((stats.wide_packets > 0) == canopy::simd::native_width<16>);
-        CHECK(stats.packed_rays() + stats.single_rays == tiles.size());
-        tally t;
-        compare(tiles, &s.mesh, &s.mesh + 1, canopy::default_intersector{}, t);
-        compare(tiles, &s.mesh, &s.mesh + 1, alpha_hook{}, t);
-        compare(tiles, &s.nested.top, &s.nested.top + 1, canopy::default_intersector{}, t);
-        CHECK(t.mismatches == 0);
-        CHECK(t.packets > 0);
-    }
+    check_packets_of_16(camera_rays_in_blocks(box, 40, 24, 4, 4), alpha_hook{});
     CHECK(row_length(random_rays(rng, box, 2000), &s.mesh, &s.mesh + 1) == 0);
     CHECK(row_length(camera_rays(box, 600, 1), &s.mesh, &s.mesh + 1) == 0);
     // Invalid rays in the rows change nothing but their own results.
