@@ -205,8 +205,9 @@ inline bool packets_paid(packet_occupancy const& window, std::uint64_t packets, 
 
 // The adaptive policy's state over one batch (see the top of this file): a window of
 // batch_first_probe_packets packets, then windows of batch_probe_packets, each measured from its
-// packets' counts in packet_occupancy_tally; after a window that did not pay, batch_skip_groups coherent groups traced
-// one ray at a time. With batch_packing::always every coherent group is a packet.
+// packets' counts in packet_occupancy_tally; after a window that did not pay, batch_skip_groups
+// coherent groups traced one ray at a time. With batch_packing::always every coherent group is a
+// packet.
 // (Member functions are declared inline: in a named module they are not implicitly, and importers
 // would call them once per group instead of inlining them.)
 class packing_policy {
@@ -223,11 +224,18 @@ public:
         if (--skip_left_ == 0) open_window(batch_probe_packets);
         return false;
     }
-    // Called after each packet with the tally read before it: the packet's own counts join the
-    // window (so that packets of 8 and of 16 traced in turn count each in its own policy); a full
-    // window either opens the next or starts the skip.
-    inline void packet_traced(packet_occupancy const& before) {
-        if (!adaptive_) return;
+    // Traces one packet by calling trace(). Under the adaptive policy the packet's own counts (the
+    // tally after it less the tally before it) join the window, so that packets of 8 and of 16
+    // traced in turn count each in its own policy; a full window either opens the next or starts
+    // the skip.
+    template <typename Trace>
+    inline void trace_packet(Trace&& trace) {
+        if (!adaptive_) {
+            trace();
+            return;
+        }
+        packet_occupancy const before = packet_occupancy_tally;
+        trace();
         packet_occupancy const& after = packet_occupancy_tally;
         window_.node_visits += after.node_visits - before.node_visits;
         window_.node_lanes += after.node_lanes - before.node_lanes;
@@ -489,10 +497,8 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
                 auto const p = pack_group(rays, g);
                 bool const coherent = coherent_group(p, limit);
                 if (coherent && policy.packs_next()) {
-                    packet_occupancy const before = packet_occupancy_tally;
-                    packet(g, p);
+                    policy.trace_packet([&] { packet(g, p); });
                     ++stats.packets;
-                    policy.packet_traced(before);
                 } else {
                     for (std::size_t k = 0; k < batch_width; ++k) one(g[k]);
                     if (coherent) stats.unpacked_rays += batch_width;
@@ -502,43 +508,32 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
             stats.row_length = w;
             std::size_t const columns = w / batch_group_columns * batch_group_columns;
             if constexpr (batch_wide_packets && batch_takes_packets<I, Elem, simd::float16>()) {
-                // Squares of 4 × 4 as packets of 16 while they are coherent and pay; the others as
-                // two squares of 4 × 2.
+                // Squares of 4 × 4 (in rows) or runs of 16 (not in rows) as packets of 16 while
+                // they are coherent and pay; the others as two groups of 8, g's first half and
+                // second_half.
                 packing_policy wide_policy(packing, batch_wide_width);
+                auto const wide_group = [&](ray_group g, ray_group second_half) {
+                    auto const p = pack_wide_group(rays, g);
+                    if (coherent_group(p, limit) && wide_policy.packs_next()) {
+                        wide_policy.trace_packet([&] { packet(g, p); });
+                        ++stats.wide_packets;
+                    } else {
+                        group(g, g);
+                        group(second_half, g);
+                    }
+                };
                 std::size_t const band = batch_wide_rows * w;
                 for (; w != 0 && i + band <= n; i += band) {
                     for (std::size_t c = 0; c < columns; c += batch_group_columns) {
-                        ray_group const g{i + c, w};
                         prefetch_group(rays, {i + c + batch_prefetch_groups * batch_group_columns, w}, batch_wide_rows);
-                        auto const p = pack_wide_group(rays, g);
-                        if (coherent_group(p, limit) && wide_policy.packs_next()) {
-                            packet_occupancy const before = packet_occupancy_tally;
-                            packet(g, p);
-                            ++stats.wide_packets;
-                            wide_policy.packet_traced(before);
-                        } else {
-                            group(g, g);
-                            group({g.first + batch_group_rows * w, w}, g);
-                        }
+                        wide_group({i + c, w}, {i + c + batch_group_rows * w, w});
                     }
                     for (std::size_t r = 0; r < batch_wide_rows; ++r)
                         for (std::size_t c = columns; c < w; ++c) one(i + r * w + c);
                 }
-                // Not in rows: runs of 16 while they are coherent and pay; the others as two runs
-                // of 8.
                 for (; w == 0 && i + batch_wide_width <= n; i += batch_wide_width) {
-                    ray_group const g{i};
                     prefetch_group(rays, {i + batch_prefetch_groups * batch_wide_width}, batch_wide_rows);
-                    auto const p = pack_wide_group(rays, g);
-                    if (coherent_group(p, limit) && wide_policy.packs_next()) {
-                        packet_occupancy const before = packet_occupancy_tally;
-                        packet(g, p);
-                        ++stats.wide_packets;
-                        wide_policy.packet_traced(before);
-                    } else {
-                        group(g, g);
-                        group({i + batch_width}, g);
-                    }
+                    wide_group({i}, {i + batch_width});
                 }
             }
             if (w != 0) {
