@@ -19,8 +19,14 @@ for a in "$@"; do
   [ "$prev" = "--passes" ] && passes=$a
   prev=$a
 done
-valgrind --tool=callgrind --callgrind-out-file="$out" --collect-atstart=no --toggle-collect="$toggle" \
-  "$bin" "$@" 2>/dev/null | tee "$out.log"
+# valgrind's own messages go to $out.valgrind; the program's errors (an ISA valgrind's CPU lacks,
+# for one: BINARY built with -march=native) stay on stderr, and a failed run stops here.
+if ! valgrind --tool=callgrind --log-file="$out.valgrind" --callgrind-out-file="$out" --collect-atstart=no \
+  --toggle-collect="$toggle" "$bin" "$@" > "$out.log"; then
+  echo "callgrind_rays: $bin failed under valgrind (see above and $out.valgrind)" >&2
+  exit 1
+fi
+cat "$out.log"
 rays=$(awk '/^rays / {gsub(",", "", $2); print $2}' "$out.log")
 total=$(awk '/^summary:/ {print $2}' "$out")
 awk -v t="$total" -v r="$rays" -v p="$passes" \
