@@ -509,31 +509,32 @@ batch_stats run_batch(std::span<ray const> rays, It first, It last, batch_packin
             std::size_t const columns = w / batch_group_columns * batch_group_columns;
             if constexpr (batch_wide_packets && batch_takes_packets<I, Elem, simd::float16>()) {
                 // Squares of 4 × 4 (in rows) or runs of 16 (not in rows) as packets of 16 while
-                // they are coherent and pay; the others as two groups of 8, g's first half and
-                // second_half.
+                // they are coherent and pay; the others as two groups of 8, g's lanes 0–7 and
+                // 8–15 (the group batch_group_rows strides on: the next 4 × 2 rows, or the next 8
+                // rays of a run).
                 packing_policy wide_policy(packing, batch_wide_width);
-                auto const wide_group = [&](ray_group g, ray_group second_half) {
+                auto const wide_group = [&](ray_group g) {
                     auto const p = pack_wide_group(rays, g);
                     if (coherent_group(p, limit) && wide_policy.packs_next()) {
                         wide_policy.trace_packet([&] { packet(g, p); });
                         ++stats.wide_packets;
                     } else {
                         group(g, g);
-                        group(second_half, g);
+                        group({g.first + batch_group_rows * g.stride, g.stride}, g);
                     }
                 };
                 std::size_t const band = batch_wide_rows * w;
                 for (; w != 0 && i + band <= n; i += band) {
                     for (std::size_t c = 0; c < columns; c += batch_group_columns) {
                         prefetch_group(rays, {i + c + batch_prefetch_groups * batch_group_columns, w}, batch_wide_rows);
-                        wide_group({i + c, w}, {i + c + batch_group_rows * w, w});
+                        wide_group({i + c, w});
                     }
                     for (std::size_t r = 0; r < batch_wide_rows; ++r)
                         for (std::size_t c = columns; c < w; ++c) one(i + r * w + c);
                 }
                 for (; w == 0 && i + batch_wide_width <= n; i += batch_wide_width) {
                     prefetch_group(rays, {i + batch_prefetch_groups * batch_wide_width}, batch_wide_rows);
-                    wide_group({i}, {i + batch_width});
+                    wide_group({i});
                 }
             }
             if (w != 0) {
